@@ -1,0 +1,54 @@
+# charctl — `make help` lists the targets. Two commands on a fresh machine: `make demo`, `make test`.
+SHELL := /bin/bash
+PYTHON ?= python3
+VENV := .venv
+PY := $(VENV)/bin/python
+PIP := $(VENV)/bin/pip
+CHARCTL := $(VENV)/bin/charctl
+# On this (CPU-only) machine torch 2.13.0 is a local CPU wheel. A GPU user installs the CUDA
+# build first (see README) and runs `make install TORCH=skip`.
+TORCH ?= torch==2.13.0
+STAMP := $(VENV)/.charctl-installed
+export MUJOCO_GL ?= osmesa
+export PYOPENGL_PLATFORM ?= osmesa
+
+.DEFAULT_GOAL := help
+.PHONY: help install render-deps test test-fast test-slow demo bench clean-outputs
+
+help: ## show this help
+	@grep -hE '^[a-zA-Z0-9_-]+:.*## ' $(MAKEFILE_LIST) | awk 'BEGIN {FS = ":.*## "}; {printf "  \033[36m%-24s\033[0m %s\n", $$1, $$2}'
+
+install: $(STAMP) ## create .venv and install charctl (idempotent: re-runs only when pyproject.toml changes)
+
+$(STAMP): pyproject.toml
+	@$(MAKE) --no-print-directory render-deps
+	test -x $(PY) || $(PYTHON) -m venv $(VENV)
+	$(PIP) install -q --upgrade pip
+	@if [ "$(TORCH)" != "skip" ]; then $(PIP) install -q "$(TORCH)"; fi
+	$(PIP) install -q -e '.[test]'
+	touch $(STAMP)
+
+render-deps: ## install the OSMesa library MuJoCo's offscreen renderer needs (Debian; best effort)
+	@if ldconfig -p 2>/dev/null | grep -q libOSMesa; then :; \
+	elif [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null; then \
+	  (apt-get install -y -qq libosmesa6 >/dev/null 2>&1 || (apt-get update -qq >/dev/null 2>&1 && apt-get install -y -qq libosmesa6 >/dev/null 2>&1)) \
+	  || echo "note: could not install libosmesa6; video export will say how to enable rendering"; \
+	else echo "note: install libosmesa6 (or use MUJOCO_GL=egl) to render videos"; fi
+
+test: install ## install, then run the whole test suite (< 10 min on 2 cores)
+	$(PY) -m pytest -q -m "not slow"
+
+test-slow: install ## the slow learning checks (minutes each)
+	$(PY) -m pytest -q -m slow
+
+demo: install ## install, then run the main job at a small default scale
+	$(CHARCTL) data list
+	$(CHARCTL) export bvh walk -o outputs/demo/walk.bvh
+	$(CHARCTL) export video walk -o outputs/demo/walk.mp4
+	@echo "demo artefacts in outputs/demo/"
+
+bench: install ## throughput benchmarks (scripts/bench_*.py)
+	$(PY) scripts/bench_sim.py
+
+clean-outputs: ## delete everything under outputs/ except its README
+	find outputs -mindepth 1 -not -name README.md -delete

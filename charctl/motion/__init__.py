@@ -1,0 +1,1 @@
+"""Motion library: clips, skeleton, forward kinematics, centre of mass, BVH."""

@@ -1,0 +1,73 @@
+"""Rich progress bars for long loops (training iterations, sweeps, rollouts)."""
+
+from __future__ import annotations
+
+import contextlib
+import sys
+import time
+from typing import Iterator
+
+
+class TrainingProgress:
+    """A progress bar over `total` samples (or generations, frames ...) with rate and ETA.
+
+    `update(n, **stats)` advances by n and shows the latest stats (e.g. r_S=0.61) on the bar.
+    On a non-terminal (CI, pipes) it prints one plain line every `plain_every` seconds instead.
+    """
+
+    def __init__(self, total: float, description: str, unit: str = "samples", plain_every: float = 10.0):
+        from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
+
+        self.total = total
+        self.unit = unit
+        self.description = description
+        self.start = time.perf_counter()
+        self.done = 0.0
+        self.interactive = sys.stderr.isatty()
+        self.plain_every = plain_every
+        self._last_plain = 0.0
+        self.progress = None
+        if self.interactive:
+            self.progress = Progress(
+                TextColumn("[bold]{task.description}"), BarColumn(), MofNCompleteColumn(),
+                TextColumn("{task.fields[rate]}"), TimeElapsedColumn(), TextColumn("ETA"), TimeRemainingColumn(),
+                TextColumn("{task.fields[stats]}"), transient=False,
+            )
+            self.task = self.progress.add_task(description, total=total, rate="", stats="")
+
+    def __enter__(self) -> "TrainingProgress":
+        if self.progress is not None:
+            self.progress.start()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        if self.progress is not None:
+            self.progress.stop()
+        else:
+            self._plain(force=True)
+
+    @property
+    def rate(self) -> float:
+        return self.done / max(time.perf_counter() - self.start, 1e-9)
+
+    def update(self, n: float = 1, **stats: float) -> None:
+        self.done += n
+        text = "  ".join(f"{k}={v:.3g}" if isinstance(v, float) else f"{k}={v}" for k, v in stats.items())
+        self._stats = text
+        if self.progress is not None:
+            self.progress.update(self.task, advance=n, rate=f"{self.rate:,.0f} {self.unit}/s", stats=text)
+        else:
+            self._plain()
+
+    def _plain(self, force: bool = False) -> None:
+        now = time.perf_counter()
+        if force or now - self._last_plain >= self.plain_every:
+            self._last_plain = now
+            pct = 100.0 * self.done / max(self.total, 1e-9)
+            print(f"{self.description}: {self.done:,.0f}/{self.total:,.0f} {self.unit} ({pct:.0f}%), {self.rate:,.0f} {self.unit}/s  {getattr(self, '_stats', '')}", file=sys.stderr, flush=True)
+
+
+@contextlib.contextmanager
+def track(total: float, description: str, unit: str = "items") -> Iterator[TrainingProgress]:
+    with TrainingProgress(total, description, unit) as bar:
+        yield bar
