@@ -52,3 +52,6 @@ bench: install ## throughput benchmarks (scripts/bench_*.py)
 
 clean-outputs: ## delete everything under outputs/ except its README
 	find outputs -mindepth 1 -not -name README.md -delete
+
+# Per-experiment reproduction targets live in mk/<experiment>.mk.
+-include mk/*.mk

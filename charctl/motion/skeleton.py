@@ -94,6 +94,20 @@ class Skeleton:
         return [np.flatnonzero(depth == d) for d in range(depth.max() + 1)]
 
     @functools.cached_property
+    def dfs_order(self) -> tuple[int, ...]:
+        """Body indices in depth-first order (children in index order), as MJCF/BVH nest them."""
+        children: dict[int, list[int]] = {b: [] for b in range(self.num_bodies)}
+        for b in range(1, self.num_bodies):
+            children[int(self.parents[b])].append(b)
+        out: list[int] = []
+        stack = [0]
+        while stack:
+            b = stack.pop()
+            out.append(b)
+            stack.extend(reversed(children[b]))
+        return tuple(out)
+
+    @functools.cached_property
     def clip_joint_bodies(self) -> np.ndarray:
         """Body index of each of the 12 clip joints."""
         return np.array([self.index(n) for n in CLIP_JOINTS])

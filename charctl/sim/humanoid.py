@@ -1,0 +1,239 @@
+"""MJCF of the DeepMimic humanoid3d for MuJoCo, and the clip <-> qpos/qvel mapping.
+
+World frame: y-up (gravity -y), the same as the clips, so no axis conversion happens anywhere.
+Bodies, joint offsets and collision shapes come from pybullet's humanoid.urdf (scaled 0.25);
+masses from the foundation issue (45 kg total); inertia from the shapes (uniform density).
+
+Actuation (decision, see README "Humanoid model"): each 3-DoF ball joint is a chain of three
+hinges (intrinsic Euler order chosen per joint to keep the middle angle far from +-90 deg over
+every shipped clip and its mirror), each driven by a MuJoCo position actuator with the PD gains
+of DeepMimic (kp, kd = kv) and its torque limit; knees and elbows are single hinges about z.
+The `implicitfast` integrator treats the kd term implicitly, which is what keeps PD stable at
+low physics rates (the role the paper's stable PD, eq 3.1, plays). Self-collision is off
+(as in DeepMimic); bodies collide with the ground plane only.
+"""
+
+from __future__ import annotations
+
+import functools
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from charctl.motion import rotations as R
+from charctl.motion.skeleton import BODY_NAMES, HINGE_JOINTS, Skeleton, load_skeleton
+
+# Intrinsic Euler order of each ball joint's hinge chain (R = R_a1 R_a2 R_a3). Chosen by the
+# largest |middle angle| over all 20 clips and their mirrors (scripts/choose_euler_orders.py):
+# chest ZYX 25 deg, neck YXZ 38, hips ZYX 55, ankles YXZ 51, shoulders XYZ 80.
+EULER_ORDER: dict[str, str] = {
+    "chest": "ZYX", "neck": "YXZ",
+    "right_hip": "ZYX", "left_hip": "ZYX",
+    "right_ankle": "YXZ", "left_ankle": "YXZ",
+    "right_shoulder": "XYZ", "left_shoulder": "XYZ",
+}
+# PD gains (kp N m/rad, kd N m s/rad) and torque limits (N m) per joint, from DeepMimic.
+PD_GAINS: dict[str, tuple[float, float, float]] = {
+    "chest": (1000.0, 100.0, 200.0), "neck": (100.0, 10.0, 50.0),
+    "hip": (500.0, 50.0, 200.0), "knee": (500.0, 50.0, 150.0), "ankle": (400.0, 40.0, 90.0),
+    "shoulder": (400.0, 40.0, 100.0), "elbow": (300.0, 30.0, 60.0),
+}
+HINGE_LIMITS = {"knee": (-3.14, 0.0), "elbow": (0.0, 3.14)}
+_AXES = {"X": "1 0 0", "Y": "0 1 0", "Z": "0 0 1"}
+
+
+def _kind(joint: str) -> str:
+    return joint.split("_")[-1]
+
+
+@dataclass(frozen=True)
+class HumanoidLayout:
+    """Where each body's degrees of freedom live in qpos/qvel/ctrl."""
+
+    joint_bodies: tuple[str, ...]  # actuated bodies in MJCF (depth-first) order, no root/wrists
+    qpos_slices: dict[str, slice]
+    qvel_slices: dict[str, slice]
+    nq: int
+    nv: int
+    nu: int
+
+
+@functools.lru_cache(maxsize=1)
+def layout() -> HumanoidLayout:
+    skel = load_skeleton()
+    names = [skel.names[b] for b in skel.dfs_order]  # the MJCF nests bodies depth-first
+    bodies = tuple(n for n in names[1:] if not n.endswith("wrist"))
+    qp, qv, q, v = {}, {}, 7, 6
+    for b in bodies:
+        width = 1 if b in HINGE_JOINTS else 3
+        qp[b] = slice(q, q + width)
+        qv[b] = slice(v, v + width)
+        q += width
+        v += width
+    return HumanoidLayout(bodies, qp, qv, q, v, q - 7)
+
+
+def build_mjcf(
+    physics_hz: float = 600.0,
+    friction: float = 1.0,
+    armature: float = 0.01,
+    skeleton: Skeleton | None = None,
+    floor_size: float = 50.0,
+) -> str:
+    """MJCF text of the humanoid on a ground plane. Physics timestep = 1 / physics_hz."""
+    skel = skeleton or load_skeleton()
+    children: dict[int, list[int]] = {b: [] for b in range(skel.num_bodies)}
+    for b in range(1, skel.num_bodies):
+        children[int(skel.parents[b])].append(b)
+    lines: list[str] = []
+    actuators: list[str] = []
+
+    def geom_xml(b: int) -> str:
+        g = skel.geoms[b]
+        m = skel.masses[b]
+        p = np.array(g.pos)
+        common = f'name="{skel.names[b]}" mass="{m}" rgba="{_color(skel.names[b])}"'
+        if g.kind == "sphere":
+            return f'<geom type="sphere" size="{g.size[0]:.5f}" pos="{p[0]:.5f} {p[1]:.5f} {p[2]:.5f}" {common}/>'
+        if g.kind == "capsule":
+            r, half = g.size
+            a, c = p + [0, half, 0], p - [0, half, 0]
+            return f'<geom type="capsule" size="{r:.5f}" fromto="{a[0]:.5f} {a[1]:.5f} {a[2]:.5f} {c[0]:.5f} {c[1]:.5f} {c[2]:.5f}" {common}/>'
+        h = g.size
+        return f'<geom type="box" size="{h[0]:.5f} {h[1]:.5f} {h[2]:.5f}" pos="{p[0]:.5f} {p[1]:.5f} {p[2]:.5f}" {common}/>'
+
+    def emit(b: int, depth: int) -> None:
+        name = skel.names[b]
+        pad = "  " * (depth + 2)
+        off = skel.offsets[b] if b > 0 else np.array([0.0, 0.9, 0.0])
+        lines.append(f'{pad}<body name="{name}" pos="{off[0]:.6f} {off[1]:.6f} {off[2]:.6f}">')
+        if b == 0:
+            lines.append(f'{pad}  <freejoint name="root"/>')
+            lines.append(f'{pad}  <camera name="side" mode="trackcom" pos="0 0.3 4.0" xyaxes="1 0 0 0 0.995 -0.1"/>')
+            lines.append(f'{pad}  <camera name="front" mode="trackcom" pos="4.0 0.3 0" xyaxes="0 0 -1 -0.1 0.995 0"/>')
+        elif not name.endswith("wrist"):
+            kp, kd, lim = PD_GAINS[_kind(name)]
+            if name in HINGE_JOINTS:
+                lo, hi = HINGE_LIMITS[_kind(name)]
+                lines.append(f'{pad}  <joint name="{name}" type="hinge" axis="0 0 1" range="{lo} {hi}" limited="true"/>')
+                actuators.append(_actuator(name, kp, kd, lim))
+            else:
+                for axis in EULER_ORDER[name]:
+                    jn = f"{name}_{axis.lower()}"
+                    lines.append(f'{pad}  <joint name="{jn}" type="hinge" axis="{_AXES[axis]}"/>')
+                    actuators.append(_actuator(jn, kp, kd, lim))
+        lines.append(f"{pad}  {geom_xml(b)}")
+        for c in children[b]:
+            emit(c, depth + 1)
+        lines.append(f"{pad}</body>")
+
+    emit(0, 0)
+    body = "\n".join(lines)
+    acts = "\n    ".join(actuators)
+    return f"""<mujoco model="charctl_humanoid3d">
+  <compiler angle="radian" inertiafromgeom="true"/>
+  <option timestep="{1.0 / physics_hz:.8f}" gravity="0 -9.81 0" integrator="implicitfast"/>
+  <size memory="4M"/>
+  <visual><global offwidth="1280" offheight="720"/><quality shadowsize="2048"/></visual>
+  <default>
+    <joint armature="{armature}" damping="0"/>
+    <geom contype="1" conaffinity="0" friction="{friction} 0.005 0.0001" condim="3"/>
+  </default>
+  <asset>
+    <texture name="grid" type="2d" builtin="checker" rgb1="0.82 0.84 0.86" rgb2="0.68 0.70 0.74" width="512" height="512"/>
+    <material name="grid" texture="grid" texrepeat="{floor_size} {floor_size}" reflectance="0.05"/>
+    <texture name="sky" type="skybox" builtin="gradient" rgb1="0.55 0.7 0.9" rgb2="0.95 0.95 1.0" width="256" height="256"/>
+  </asset>
+  <worldbody>
+    <light name="sun" pos="2 6 3" dir="-0.3 -1 -0.4" directional="true" castshadow="true"/>
+    <geom name="floor" type="plane" size="{floor_size} {floor_size} 0.1" quat="0.70710678 -0.70710678 0 0" material="grid" contype="0" conaffinity="1"/>
+{body}
+  </worldbody>
+  <actuator>
+    {acts}
+  </actuator>
+</mujoco>
+"""
+
+
+def _actuator(joint: str, kp: float, kd: float, limit: float) -> str:
+    return f'<position name="{joint}" joint="{joint}" kp="{kp}" kv="{kd}" forcelimited="true" forcerange="{-limit} {limit}"/>'
+
+
+def _color(name: str) -> str:
+    if name.startswith("right_"):
+        return "0.85 0.45 0.35 1"
+    if name.startswith("left_"):
+        return "0.35 0.55 0.85 1"
+    return "0.8 0.8 0.78 1"
+
+
+@functools.lru_cache(maxsize=8)
+def load_model(physics_hz: float = 600.0, friction: float = 1.0, armature: float = 0.01):
+    """Compiled MjModel (cached per settings). Heavy import inside."""
+    import mujoco
+
+    return mujoco.MjModel.from_xml_string(build_mjcf(physics_hz, friction, armature))
+
+
+# ---------------------------------------------------------------------------- clip <-> qpos
+def local_rot_to_qpos(root_pos: np.ndarray, local_rot: np.ndarray) -> np.ndarray:
+    """(..., 3) root positions and (..., 15, 4) local rotations -> (..., nq) qpos."""
+    lay = layout()
+    skel = load_skeleton()
+    shape = local_rot.shape[:-2]
+    qpos = np.zeros(shape + (lay.nq,))
+    qpos[..., :3] = root_pos
+    qpos[..., 3:7] = R.xyzw_to_wxyz(local_rot[..., 0, :])
+    for order, bodies in _bodies_by_order().items():
+        idx = [skel.index(b) for b in bodies]
+        q = local_rot[..., idx, :].reshape(-1, 4)
+        angles = Rotation.from_quat(q).as_euler(order).reshape(shape + (len(bodies), 3))
+        for k, b in enumerate(bodies):
+            qpos[..., lay.qpos_slices[b]] = angles[..., k, :]
+    for b in HINGE_JOINTS:
+        q = local_rot[..., skel.index(b), :]
+        qpos[..., lay.qpos_slices[b].start] = 2.0 * np.arctan2(q[..., 2], q[..., 3])
+    return qpos
+
+
+def qpos_to_local_rot(qpos: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(..., nq) qpos -> root positions (..., 3) and local rotations (..., 15, 4) xyzw."""
+    lay = layout()
+    skel = load_skeleton()
+    shape = qpos.shape[:-1]
+    rot = np.tile(R.IDENTITY, shape + (skel.num_bodies, 1))
+    rot[..., 0, :] = R.normalize(R.wxyz_to_xyzw(qpos[..., 3:7]))
+    for order, bodies in _bodies_by_order().items():
+        angles = np.stack([qpos[..., lay.qpos_slices[b]] for b in bodies], axis=-2)
+        q = Rotation.from_euler(order, angles.reshape(-1, 3)).as_quat().reshape(shape + (len(bodies), 4))
+        for k, b in enumerate(bodies):
+            rot[..., skel.index(b), :] = q[..., k, :]
+    for b in HINGE_JOINTS:
+        rot[..., skel.index(b), :] = R.from_axis_angle(np.array([0.0, 0.0, 1.0]), qpos[..., lay.qpos_slices[b].start])
+    return qpos[..., :3].copy(), rot
+
+
+def clip_to_qpos_qvel(clip) -> tuple[np.ndarray, np.ndarray]:
+    """Per-frame qpos (T, nq) and qvel (T, nv) of a clip (finite-difference velocities).
+
+    qvel follows MuJoCo's conventions: free-joint linear velocity in the world frame, angular
+    velocity in the root body frame; hinge rates from unwrapped angles.
+    """
+    qpos = local_rot_to_qpos(clip.root_pos, clip.local_rot)
+    lay = layout()
+    qvel = np.zeros((clip.num_frames, lay.nv))
+    qvel[:, :3] = clip.root_linear_velocity()
+    qvel[:, 3:6] = clip.local_angular_velocity()[:, 0]
+    angles = np.unwrap(qpos[:, 7:], axis=0)
+    qvel[:, 6:] = np.gradient(angles, clip.dt, axis=0) if clip.num_frames > 1 else 0.0
+    return qpos, qvel
+
+
+@functools.lru_cache(maxsize=1)
+def _bodies_by_order() -> dict[str, tuple[str, ...]]:
+    out: dict[str, list[str]] = {}
+    for b, order in EULER_ORDER.items():
+        out.setdefault(order, []).append(b)
+    return {k: tuple(v) for k, v in out.items()}

@@ -1,0 +1,110 @@
+"""Offscreen MuJoCo rendering to mp4 (imageio-ffmpeg's bundled ffmpeg).
+
+Headless machines render through OSMesa (`MUJOCO_GL=osmesa`, Debian package libosmesa6,
+installed by `make install`) or EGL (`MUJOCO_GL=egl` on a GPU box). A machine that cannot
+render gets a one-line `CharctlError` saying what to install, never a traceback.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from charctl.errors import CharctlError
+
+
+def _ensure_gl_backend() -> None:
+    if "MUJOCO_GL" not in os.environ and not os.environ.get("DISPLAY"):
+        os.environ["MUJOCO_GL"] = "osmesa"
+    if os.environ.get("MUJOCO_GL") == "osmesa":
+        os.environ.setdefault("PYOPENGL_PLATFORM", "osmesa")
+
+
+def make_renderer(model, width: int = 640, height: int = 360):
+    """A mujoco.Renderer, or a one-line CharctlError explaining how to enable rendering."""
+    _ensure_gl_backend()
+    try:
+        import mujoco
+
+        return mujoco.Renderer(model, height=height, width=width)
+    except Exception as exc:  # missing libOSMesa / EGL, no display ...
+        backend = os.environ.get("MUJOCO_GL", "default")
+        raise CharctlError(
+            f"cannot render with MUJOCO_GL={backend} ({str(exc).splitlines()[0][:100]}); "
+            "install Debian's libosmesa6 (`make render-deps`) or set MUJOCO_GL=egl on a GPU machine"
+        ) from None
+
+
+def write_video(frames: list[np.ndarray], path: str | Path, fps: float) -> Path:
+    """Write HxWx3 uint8 frames as an H.264 mp4 (atomic: temp file then rename)."""
+    import imageio.v2 as imageio
+
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    if not frames:
+        raise CharctlError("no frames to write")
+    tmp = path.with_name(path.stem + ".tmp" + path.suffix)
+    with imageio.get_writer(tmp, fps=float(fps), codec="libx264", quality=7, macro_block_size=8) as w:
+        for f in frames:
+            w.append_data(np.asarray(f, dtype=np.uint8))
+    os.replace(tmp, path)
+    return path
+
+
+def render_qpos(
+    model,
+    qpos: np.ndarray,
+    path: str | Path,
+    fps: float,
+    width: int = 640,
+    height: int = 360,
+    camera: str | int | None = "side",
+    annotate: Callable[[object, int], None] | None = None,
+) -> dict:
+    """Render a (T, nq) qpos sequence of `model` (kinematic playback) to an mp4.
+
+    `camera` names a camera of the model (the humanoid has tracking cameras "side" and
+    "front"); None uses MuJoCo's default free camera. `annotate(scene, t)` may add geoms (e.g.
+    force arrows) to the scene before each frame is drawn. Returns frame count and render fps.
+    """
+    import mujoco
+
+    renderer = make_renderer(model, width, height)
+    data = mujoco.MjData(model)
+    cam = camera
+    if isinstance(camera, str):
+        try:
+            cam = model.camera(camera).id
+        except KeyError:
+            cam = -1
+    frames = []
+    t0 = time.perf_counter()
+    try:
+        for t in range(qpos.shape[0]):
+            data.qpos[:] = qpos[t]
+            mujoco.mj_forward(model, data)
+            renderer.update_scene(data, camera=cam if cam is not None else -1)
+            if annotate is not None:
+                annotate(renderer.scene, t)
+            frames.append(renderer.render().copy())
+    finally:
+        renderer.close()
+    render_fps = len(frames) / max(time.perf_counter() - t0, 1e-9)
+    write_video(frames, path, fps)
+    return {"frames": len(frames), "render_fps": render_fps, "path": str(path)}
+
+
+def render_clip(clip, path: str | Path, fps: float | None = None, width: int = 640, height: int = 360) -> dict:
+    """Kinematic playback of a humanoid clip (resampled to `fps` if given) as an mp4."""
+    from charctl.sim.humanoid import load_model, local_rot_to_qpos
+
+    if fps is not None:
+        if fps <= 0:
+            raise CharctlError(f"--fps must be positive, got {fps}")
+        clip = clip.resample(fps)
+    qpos = local_rot_to_qpos(clip.root_pos, clip.local_rot)
+    return render_qpos(load_model(), qpos, path, clip.fps, width, height)
