@@ -8,5 +8,8 @@ __version__ = "0.1.0"
 # default to OSMesa (software, Debian's libosmesa6) so offscreen rendering works headless.
 if not _os.environ.get("DISPLAY") and "MUJOCO_GL" not in _os.environ:
     _os.environ["MUJOCO_GL"] = "osmesa"
+# OpenMP threads (torch) busy-wait by default, which wastes the few cores of a shared or small
+# machine while MuJoCo's batch threads work; passive waiting costs nothing measurable here.
+_os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 if _os.environ.get("MUJOCO_GL") == "osmesa":
     _os.environ.setdefault("PYOPENGL_PLATFORM", "osmesa")

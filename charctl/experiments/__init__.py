@@ -42,6 +42,10 @@ def entry(name: str, func: str):
     """The function `func` of experiment `name`, or a one-line error if it does not provide it."""
     mod = get_experiment(name)
     fn = getattr(mod, func, None)
+    if isinstance(fn, ModuleType):
+        # a submodule named like the entry point (e.g. train.py) shadows the function once it is
+        # imported; fall back to the function of the same name inside that submodule
+        fn = getattr(fn, func, None)
     if fn is None:
         raise CharctlError(f"experiment {name!r} does not support `{func}`")
     return fn

@@ -1,0 +1,99 @@
+"""Structured config of the cgail experiment (SPEC §1). Values here are defaults; the paper's
+numbers are set in conf/experiment/cgail.yaml and the scale presets in conf/preset/cgail/."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from charctl.config import BaseConfig
+from charctl.rl.ppo import PPOConfig
+
+
+@dataclass
+class SkillConfig:
+    """One commandable skill: a name the user types, the clip it imitates, and its goal."""
+
+    name: str = "walk"
+    clip: str = "walk"  # charctl clip spec (catalogue name, ':mirror' for the mirrored copy)
+    heading_goal: bool = False  # locomotion skills get the heading goal r_G; others r_G = 1
+
+
+@dataclass
+class EnvConfig:
+    num_envs: int = 64  # humanoids simulated together
+    physics_hz: float = 300.0  # MuJoCo rate (bench_sim.py --sweep: 120 Hz blows up, >= 240 Hz stable)
+    control_hz: float = 30.0  # policy rate (DeepMimic: 30 Hz)
+    episode_seconds: float = 10.0  # truncation length of an episode
+    ramp_frames: int = 60  # eq 4.10-4.11: linear command ramp length (control frames); 0 = switch in one frame
+    switch_prob: float = 0.01  # per control step, probability of re-sampling the command within an episode
+    action_scale: float = 1.0  # PD target (rad) = rest pose + action_scale * action
+    fall_tolerance: float = 0.005  # m: a non-foot body this close to the ground ends the episode (a fall)
+    goal_max_angle_deg: float = 45.0  # new heading goals lie within +- this angle of the current heading
+    goal_sharpness: float = 2.0  # r_G = exp(-sharpness * (v_target - d . v_xz)^2), v_target = the clip's mean speed
+
+
+@dataclass
+class RewardConfig:
+    w_style: float = 0.5  # w_S, eq 4.1
+    w_class: float = 0.5  # w_C, eq 4.1 (ignored when cgail.conditional=false)
+    w_goal: float = 0.0  # w_G, eq 4.1 (0 at small scale; the paper adds it for locomotion tasks)
+
+
+@dataclass
+class DiscConfig:
+    hidden: list[int] = field(default_factory=lambda: [1024, 512, 512])  # paper §5.3
+    lr: float = 1e-4  # Adam
+    w_gp: float = 0.5  # eq 4.6 gradient-penalty weight on data samples
+    w_class_loss: float = 1.0  # weight of L_class in eq 4.2
+    batch_size: int = 512  # data and policy pairs per discriminator step (each)
+    steps_per_iter: int = 10  # discriminator gradient steps per PPO iteration
+    replay_size: int = 100_000  # policy-pair replay buffer
+    replay_fraction: float = 0.5  # share of the policy half drawn from the replay buffer
+
+
+@dataclass
+class CgailSection:
+    conditional: bool = True  # false = AMP baseline: no class head, no command input, style reward only
+    class_loss: str = "ce"  # ce (eq 4.5) | ls (least squares ablation, eq 6.2)
+
+
+@dataclass
+class TrainConfig:
+    total_samples: int = 2_000_000  # environment steps over the whole run
+    rollout_steps: int = 32  # control steps per env per PPO iteration
+    checkpoint_every: int = 10  # iterations between checkpoints
+    log_every: int = 1
+    torch_threads: int = 2
+
+
+@dataclass
+class Config(BaseConfig):
+    experiment: str = "cgail"
+    skills: list[SkillConfig] = field(default_factory=lambda: [SkillConfig()])
+    use_skills: list[str] = field(default_factory=list)  # subset of skill names to train (empty = all), e.g. [walk]
+    env: EnvConfig = field(default_factory=EnvConfig)
+    ppo: PPOConfig = field(default_factory=PPOConfig)
+    disc: DiscConfig = field(default_factory=DiscConfig)
+    reward: RewardConfig = field(default_factory=RewardConfig)
+    cgail: CgailSection = field(default_factory=CgailSection)
+    train: TrainConfig = field(default_factory=TrainConfig)
+
+    @staticmethod
+    def check(cfg) -> str | None:
+        """Cross-field checks; returns a message or None."""
+        if not cfg.skills:
+            return "skills must list at least one skill"
+        names = [s.name for s in cfg.skills]
+        unknown = [n for n in cfg.use_skills if n not in names]
+        if unknown:
+            return f"use_skills names unknown skill(s) {unknown}; skills are {names}"
+        if len(set(names)) != len(names):
+            return f"skill names must be unique, got {names}"
+        if cfg.cgail.class_loss not in ("ce", "ls"):
+            return f"cgail.class_loss must be 'ce' or 'ls', got {cfg.cgail.class_loss!r}"
+        ratio = cfg.env.physics_hz / cfg.env.control_hz
+        if abs(ratio - round(ratio)) > 1e-6:
+            return f"env.physics_hz ({cfg.env.physics_hz}) must be a multiple of env.control_hz ({cfg.env.control_hz})"
+        if cfg.env.ramp_frames < 0:
+            return "env.ramp_frames must be >= 0"
+        return None

@@ -1,0 +1,113 @@
+"""Conditional discriminator (style head D and class head C), its losses and the rewards.
+
+Input φ = (o_t, o_t+1), normalised with statistics of the demonstration data (frozen).
+All layers spectral-normalised (paper §5.3). Losses (eq 4.2-4.6):
+    L_style = E_M[(D - 1)^2] + E_pi[(D + 1)^2]
+    L_class = CE(C(φ_M), clip label) + CE(C(φ_pi), c̄)       (soft target c̄ during transitions)
+              or, with class_loss="ls", sum ||c̄ - softmax C||^2  (eq 6.2 ablation)
+    L_gp    = (w_gp / 2) E_M[ ||∇_φ D(φ)||^2 ]
+Rewards: r_S = clip(1 - 1/4 (1 - D)^2, 0, 1) (eq 4.7); r_C = 1 - min(1, ||softmax C - c̄||_1) (eq 4.8),
+blended (1 - w) r_C(c_A) + w r_C(c_B) during a transition (eq 4.11).
+"""
+
+from __future__ import annotations
+
+import torch
+import torch.nn.functional as F
+from torch import nn
+
+from charctl.nn.mlp import ACTIVATIONS, RunningNorm
+
+SN = nn.utils.parametrizations.spectral_norm
+
+
+class Discriminator(nn.Module):
+    def __init__(self, pair_dim: int, num_classes: int, hidden: list[int], conditional: bool = True, activation: str = "relu"):
+        super().__init__()
+        self.norm = RunningNorm(pair_dim, clip=10.0)
+        layers: list[nn.Module] = []
+        d = pair_dim
+        for h in hidden:
+            layers += [SN(nn.Linear(d, h)), ACTIVATIONS[activation]()]
+            d = h
+        self.trunk = nn.Sequential(*layers)
+        self.style_head = SN(nn.Linear(d, 1))
+        self.conditional = conditional
+        self.class_head = SN(nn.Linear(d, num_classes)) if conditional else None
+        self.num_classes = num_classes
+
+    def forward(self, pairs: torch.Tensor, normalized: bool = False) -> tuple[torch.Tensor, torch.Tensor | None]:
+        """(D score (B,), class logits (B, K) or None)."""
+        x = pairs if normalized else self.norm(pairs)
+        h = self.trunk(x)
+        d = self.style_head(h).squeeze(-1)
+        return d, (self.class_head(h) if self.class_head is not None else None)
+
+
+def style_loss(d_data: torch.Tensor, d_policy: torch.Tensor) -> torch.Tensor:
+    """LSGAN, eq 4.4: data -> +1, policy -> -1."""
+    return ((d_data - 1.0) ** 2).mean() + ((d_policy + 1.0) ** 2).mean()
+
+
+def class_loss(logits: torch.Tensor, target: torch.Tensor, kind: str = "ce") -> torch.Tensor:
+    """Eq 4.5 (soft-label cross-entropy) or the least-squares ablation (eq 6.2). target: (B, K) probabilities."""
+    if kind == "ce":
+        return -(target * F.log_softmax(logits, dim=-1)).sum(-1).mean()
+    if kind == "ls":
+        return ((target - F.softmax(logits, dim=-1)) ** 2).sum(-1).mean()
+    raise ValueError(f"unknown class loss {kind!r}")
+
+
+def gradient_penalty(disc: Discriminator, pairs_normalized: torch.Tensor, w_gp: float) -> torch.Tensor:
+    """(w_gp / 2) E[||∇_φ D(φ)||^2] on (normalised) data pairs, eq 4.6."""
+    x = pairs_normalized.detach().requires_grad_(True)
+    d, _ = disc(x, normalized=True)
+    (grad,) = torch.autograd.grad(d.sum(), x, create_graph=True)
+    return 0.5 * w_gp * (grad**2).sum(-1).mean()
+
+
+def style_reward(d: torch.Tensor) -> torch.Tensor:
+    """r_S = 1 - 1/4 (1 - D)^2, clipped to [0, 1] (eq 4.7)."""
+    return torch.clamp(1.0 - 0.25 * (1.0 - d) ** 2, 0.0, 1.0)
+
+
+def class_reward(probs: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
+    """r_C = 1 - min(1, ||C - c̄||_1) (eq 4.8)."""
+    return 1.0 - torch.clamp((probs - target).abs().sum(-1), max=1.0)
+
+
+def blended_class_reward(probs: torch.Tensor, cmd_a: torch.Tensor, cmd_b: torch.Tensor, w: torch.Tensor, num_classes: int) -> torch.Tensor:
+    """Eq 4.11: (1 - w) r_C(c_A) + w r_C(c_B) with one-hot c_A, c_B."""
+    ca = F.one_hot(cmd_a, num_classes).to(probs.dtype)
+    cb = F.one_hot(cmd_b, num_classes).to(probs.dtype)
+    return (1.0 - w) * class_reward(probs, ca) + w * class_reward(probs, cb)
+
+
+class ReplayBuffer:
+    """Ring buffer of policy pairs and their command blends (for the discriminator's policy half)."""
+
+    def __init__(self, capacity: int, pair_dim: int, num_classes: int):
+        self.pairs = torch.zeros(capacity, pair_dim)
+        self.cond = torch.zeros(capacity, num_classes)
+        self.capacity, self.size, self.pos = capacity, 0, 0
+
+    def add(self, pairs: torch.Tensor, cond: torch.Tensor) -> None:
+        n = pairs.shape[0]
+        if n >= self.capacity:
+            pairs, cond, n = pairs[-self.capacity :], cond[-self.capacity :], self.capacity
+        idx = (torch.arange(n) + self.pos) % self.capacity
+        self.pairs[idx], self.cond[idx] = pairs, cond
+        self.pos = int((self.pos + n) % self.capacity)
+        self.size = min(self.capacity, self.size + n)
+
+    def sample(self, n: int, generator: torch.Generator | None = None) -> tuple[torch.Tensor, torch.Tensor]:
+        idx = torch.randint(0, max(self.size, 1), (n,), generator=generator)
+        return self.pairs[idx], self.cond[idx]
+
+    def state_dict(self) -> dict:
+        return {"pairs": self.pairs[: self.size].clone(), "cond": self.cond[: self.size].clone(), "pos": self.pos, "size": self.size}
+
+    def load_state_dict(self, s: dict) -> None:
+        n = int(s["size"])
+        self.pairs[:n], self.cond[:n] = s["pairs"], s["cond"]
+        self.size, self.pos = n, int(s["pos"])

@@ -1,0 +1,188 @@
+"""Batched multi-skill imitation environment on the foundation simulator (SPEC §1).
+
+Per env: the commanded skill B, the previous one A and the ramp weight w (eq 4.10:
+c̄ = (1 - w) c_A + w c_B, w rising linearly over `ramp_frames`), the step count and, for
+locomotion skills, a heading goal. Reset = reference-state initialisation (RSI) from a random
+frame of the commanded skill's clip, turned by a random yaw and moved to the origin. An episode
+ends on a fall (a body other than the feet touches the ground), on a simulator blow-up (the
+batch resets that env and counts it) or at `episode_seconds` (truncation).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from charctl.experiments.cgail.features import DISC_OBS_DIM, STATE_DIM, disc_obs, policy_state, sim_kinematics
+from charctl.experiments.cgail.skills import SkillData
+from charctl.motion import rotations as R
+from charctl.sim.batch import BatchedHumanoid, SimSettings
+
+GOAL_DIM = 2
+
+
+@dataclass
+class StepResult:
+    state: np.ndarray  # (N, state_dim) next policy state (after resets)
+    obs: np.ndarray  # (N, 133) next disc obs (after resets)
+    pair_next: np.ndarray  # (N, 133) o_t+1 of the transition just taken (before resets)
+    final_state: np.ndarray  # (N, state_dim) s_t+1 before resets (for truncation bootstrapping)
+    r_goal: np.ndarray  # (N,)
+    terminated: np.ndarray  # (N,) bool: fall or blow-up
+    truncated: np.ndarray  # (N,) bool: time limit
+    unstable: np.ndarray  # (N,) bool: simulator blow-up this step
+
+
+class CgailEnv:
+    def __init__(self, skills: list[SkillData], env_cfg, seed: int = 0, conditional: bool = True):
+        self.skills = skills
+        self.cfg = env_cfg
+        self.K = len(skills)
+        self.conditional = conditional
+        self.rng = np.random.default_rng(seed)
+        self.sim = BatchedHumanoid(env_cfg.num_envs, SimSettings(physics_hz=env_cfg.physics_hz, control_hz=env_cfg.control_hz))
+        self.N = env_cfg.num_envs
+        self.max_steps = int(round(env_cfg.episode_seconds * env_cfg.control_hz))
+        self.cmd = np.zeros(self.N, dtype=np.int64)  # B: current command
+        self.prev_cmd = np.zeros(self.N, dtype=np.int64)  # A: previous command
+        self.w = np.ones(self.N)  # ramp weight
+        self.steps = np.zeros(self.N, dtype=np.int64)
+        self.goal_angle = np.zeros(self.N)  # world yaw of the heading goal (radians about +y)
+        self.forced_command: np.ndarray | None = None  # evaluation: fixed command per env (-1 = random)
+        self.has_goal = np.array([s.heading_goal for s in skills])
+        self.speed = np.array([s.mean_speed for s in skills])
+        self.rest = np.zeros(self.sim.layout.nu)
+        self.state_dim = STATE_DIM + GOAL_DIM
+        self.obs_dim = self.state_dim
+        self.episode_return_goal = np.zeros(self.N)
+        self.fall_count = 0
+        self._state = np.zeros((self.N, self.state_dim))
+        self._obs = np.zeros((self.N, DISC_OBS_DIM))
+        self.reset(np.arange(self.N))
+
+    # ------------------------------------------------------------------ commands
+    def command_blend(self) -> np.ndarray:
+        """(N, K) c̄_t = (1 - w) onehot(A) + w onehot(B)."""
+        c = np.zeros((self.N, self.K))
+        rows = np.arange(self.N)
+        c[rows, self.prev_cmd] += 1.0 - self.w
+        c[rows, self.cmd] += self.w
+        return c
+
+    def set_command(self, ids: np.ndarray, skill: np.ndarray | int, ramp: bool = True) -> None:
+        """Switch envs `ids` to `skill`; with `ramp` the blend goes A -> B over ramp_frames."""
+        ids = np.asarray(ids)
+        new = np.broadcast_to(np.asarray(skill), ids.shape)
+        changed = new != self.cmd[ids]
+        # the blend being left becomes the start of the new ramp: take its dominant command as A
+        dominant = np.where(self.w[ids] >= 0.5, self.cmd[ids], self.prev_cmd[ids])
+        self.prev_cmd[ids] = np.where(changed, dominant, self.prev_cmd[ids])
+        self.cmd[ids] = new
+        use_ramp = ramp and self.cfg.ramp_frames > 0
+        self.w[ids] = np.where(changed, 0.0 if use_ramp else 1.0, self.w[ids])
+        goal_ids = ids[changed]
+        self._new_goal(goal_ids)
+
+    def _advance_ramp(self) -> None:
+        if self.cfg.ramp_frames > 0:
+            self.w = np.minimum(1.0, self.w + 1.0 / self.cfg.ramp_frames)
+        else:
+            self.w[:] = 1.0
+
+    def _new_goal(self, ids: np.ndarray) -> None:
+        if len(ids) == 0:
+            return
+        heading = R.yaw_about_y(self.sim.body_quat_xyzw[ids, 0])
+        spread = np.radians(self.cfg.goal_max_angle_deg)
+        self.goal_angle[ids] = heading + self.rng.uniform(-spread, spread, size=len(ids))
+
+    # ------------------------------------------------------------------ reset
+    def reset(self, ids: np.ndarray) -> None:
+        """RSI of envs `ids` from a random frame of their (new) commanded skill."""
+        ids = np.asarray(ids, dtype=np.int64)
+        if ids.size == 0:
+            return
+        skill = self.rng.integers(0, self.K, size=len(ids))
+        if self.forced_command is not None:
+            forced = self.forced_command[ids]
+            skill = np.where(forced >= 0, forced, skill)
+        self.cmd[ids] = skill
+        self.prev_cmd[ids] = skill
+        self.w[ids] = 1.0
+        self.steps[ids] = 0
+        qpos = np.empty((len(ids), self.sim.layout.nq))
+        qvel = np.empty((len(ids), self.sim.layout.nv))
+        for k in np.unique(skill):  # <= K groups, vectorised inside
+            m = skill == k
+            data = self.skills[k]
+            frames = self.rng.integers(0, len(data.qpos) - 1, size=int(m.sum()))
+            qpos[m] = data.qpos[frames]
+            qvel[m] = data.qvel[frames]
+        yaw = self.rng.uniform(-np.pi, np.pi, size=len(ids))
+        turn = R.heading_quat(yaw)
+        qpos[:, [0, 2]] = 0.0
+        root = R.wxyz_to_xyzw(qpos[:, 3:7])
+        qpos[:, 3:7] = R.xyzw_to_wxyz(R.multiply(turn, root))
+        qvel[:, :3] = R.rotate(turn, qvel[:, :3])  # world linear velocity turns; angular is body-local
+        self.sim.set_state(ids, qpos, qvel)
+        self._new_goal(ids)
+        k = sim_kinematics(self.sim)
+        self._state[ids] = self._policy_state(k)[ids]
+        self._obs[ids] = disc_obs(k)[ids]
+
+    # ------------------------------------------------------------------ observation
+    def _goal_features(self, k) -> np.ndarray:
+        heading = R.yaw_about_y(k.body_rot[:, 0])
+        rel = self.goal_angle - heading
+        g = np.stack([np.cos(rel), np.sin(rel)], axis=1)
+        return g * self.has_goal[self.cmd][:, None]
+
+    def _policy_state(self, k) -> np.ndarray:
+        return np.concatenate([policy_state(k), self._goal_features(k)], axis=1)
+
+    @property
+    def state(self) -> np.ndarray:
+        return self._state
+
+    @property
+    def obs(self) -> np.ndarray:
+        return self._obs
+
+    # ------------------------------------------------------------------ step
+    def step(self, actions: np.ndarray) -> StepResult:
+        """Apply PD targets rest + action_scale * actions for one control step."""
+        targets = self.rest + self.cfg.action_scale * actions
+        unstable = self.sim.step(targets)
+        k = sim_kinematics(self.sim)
+        final_state = self._policy_state(k)
+        pair_next = disc_obs(k)
+        r_goal = self._goal_reward(k)
+        fell = self.sim.non_foot_ground_contact(self.cfg.fall_tolerance)
+        terminated = fell | unstable
+        self.steps += 1
+        truncated = (self.steps >= self.max_steps) & ~terminated
+        self.fall_count += int(fell.sum())
+        done = np.flatnonzero(terminated | truncated)
+        state, obs = final_state.copy(), pair_next.copy()
+        self._state, self._obs = state, obs
+        self._advance_ramp()
+        if done.size:
+            self.reset(done)
+        self._maybe_switch(np.setdiff1d(np.arange(self.N), done))
+        return StepResult(self._state, self._obs, pair_next, final_state, r_goal, terminated, truncated, unstable)
+
+    def _goal_reward(self, k) -> np.ndarray:
+        """r_G in [0, 1]: exp(-sharpness (v* - d . v_xz)^2) for locomotion skills, else 1."""
+        d = np.stack([np.cos(self.goal_angle), -np.sin(self.goal_angle)], axis=1)  # yaw -> (x, z) direction
+        v = k.com_vel[:, [0, 2]]
+        along = np.sum(d * v, axis=1)
+        r = np.exp(-self.cfg.goal_sharpness * (self.speed[self.cmd] - along) ** 2)
+        return np.where(self.has_goal[self.cmd], r, 1.0)
+
+    def _maybe_switch(self, ids: np.ndarray) -> None:
+        if self.K < 2 or self.cfg.switch_prob <= 0 or ids.size == 0 or self.forced_command is not None:
+            return
+        ids = ids[self.rng.random(ids.size) < self.cfg.switch_prob]
+        if ids.size:
+            self.set_command(ids, self.rng.integers(0, self.K, size=ids.size))

@@ -1,0 +1,304 @@
+"""cgail training loop: batched rollouts -> discriminator rewards -> PPO -> discriminator update.
+
+Per iteration: `rollout_steps` control steps of all envs (one policy forward per step for the
+whole batch), then one discriminator forward over every (o_t, o_t+1) pair of the rollout for
+r_S and r_C, GAE + PPO epochs, and `disc.steps_per_iter` discriminator steps on balanced
+demonstration pairs vs policy pairs (half fresh, half from the replay buffer).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+
+from charctl.errors import CharctlError
+from charctl.experiments.cgail.discriminator import (
+    Discriminator, ReplayBuffer, blended_class_reward, class_loss, gradient_penalty, style_loss, style_reward,
+)
+from charctl.experiments.cgail.env import CgailEnv
+from charctl.experiments.cgail.skills import DemoPairs, load_skills, select_skills
+from charctl.rl.ppo import PPO, ActorCritic
+from charctl.rl.storage import RolloutStorage
+
+
+@dataclass
+class Agent:
+    """Everything a checkpoint holds, built from a config."""
+
+    cfg: object
+    skills: list
+    model: ActorCritic
+    ppo: PPO
+    disc: Discriminator
+    disc_opt: torch.optim.Optimizer
+    demos: DemoPairs
+    replay: ReplayBuffer
+    generator: torch.Generator
+    iteration: int = 0
+    samples: int = 0
+    unstable_total: int = 0
+    history: dict = field(default_factory=dict)
+
+    @property
+    def conditional(self) -> bool:
+        return bool(self.cfg.cgail.conditional)
+
+    @property
+    def num_skills(self) -> int:
+        return len(self.skills)
+
+    def signature(self) -> dict:
+        return {"skills": ",".join(s.name for s in self.skills), "conditional": self.conditional,
+                "policy_hidden": list(self.cfg.ppo.hidden), "disc_hidden": list(self.cfg.disc.hidden)}
+
+
+def build_agent(cfg) -> Agent:
+    """Networks, optimisers, demonstration data and replay buffer for `cfg` (seeded)."""
+    torch.manual_seed(cfg.seed)
+    skills = load_skills(select_skills(cfg), cfg.env.control_hz)
+    K = len(skills)
+    conditional = bool(cfg.cgail.conditional)
+    from charctl.experiments.cgail.env import GOAL_DIM
+    from charctl.experiments.cgail.features import DISC_OBS_DIM, STATE_DIM
+
+    model = ActorCritic(STATE_DIM + GOAL_DIM, 28, cfg.ppo, cond_dim=K if conditional else 0)
+    gen = torch.Generator().manual_seed(cfg.seed)
+    ppo = PPO(model, cfg.ppo, generator=gen)
+    disc = Discriminator(2 * DISC_OBS_DIM, K, list(cfg.disc.hidden), conditional=conditional)
+    demos = DemoPairs(skills)
+    pairs, _ = demos.all()
+    with torch.no_grad():
+        disc.norm.update(torch.from_numpy(pairs))  # normalise with demonstration statistics (frozen)
+    disc_opt = torch.optim.Adam([p for n, p in disc.named_parameters()], lr=cfg.disc.lr)
+    replay = ReplayBuffer(cfg.disc.replay_size, 2 * DISC_OBS_DIM, K)
+    return Agent(cfg, skills, model, ppo, disc, disc_opt, demos, replay, gen)
+
+
+def agent_state(agent: Agent, env: CgailEnv | None = None) -> dict:
+    state = {
+        "ppo": agent.ppo.state_dict(), "disc": agent.disc.state_dict(), "disc_opt": agent.disc_opt.state_dict(),
+        "replay": agent.replay.state_dict(), "iteration": agent.iteration, "samples": agent.samples,
+        "unstable_total": agent.unstable_total, "torch_rng": torch.get_rng_state(), "gen_rng": agent.generator.get_state(),
+        "skills": [s.name for s in agent.skills], "clips": [s.clip_name for s in agent.skills],
+    }
+    if env is not None:
+        state["env_rng"] = env.rng.bit_generator.state
+    return state
+
+
+def load_agent_state(agent: Agent, state: dict, env: CgailEnv | None = None) -> None:
+    agent.ppo.load_state_dict(state["ppo"])
+    agent.disc.load_state_dict(state["disc"])
+    agent.disc_opt.load_state_dict(state["disc_opt"])
+    agent.replay.load_state_dict(state["replay"])
+    agent.iteration, agent.samples = int(state["iteration"]), int(state["samples"])
+    agent.unstable_total = int(state.get("unstable_total", 0))
+    torch.set_rng_state(state["torch_rng"])
+    agent.generator.set_state(state["gen_rng"])
+    if env is not None and "env_rng" in state:
+        env.rng.bit_generator.state = state["env_rng"]
+
+
+# ---------------------------------------------------------------------------- rollout
+@dataclass
+class Rollout:
+    storage: RolloutStorage
+    pairs: torch.Tensor  # (T, N, 266)
+    cond: torch.Tensor  # (T, N, K) command blend c̄_t
+    cmd_a: torch.Tensor  # (T, N)
+    cmd_b: torch.Tensor
+    w: torch.Tensor
+    r_goal: torch.Tensor  # (T, N)
+    bootstrap: torch.Tensor  # (T, N) gamma * V(s_final) on truncation
+    episode_lengths: list
+    unstable: int
+    falls: int
+
+
+def collect_rollout(agent: Agent, env: CgailEnv, steps: int, deterministic: bool = False) -> Rollout:
+    """Step all envs `steps` times with one batched policy forward per step."""
+    N, K = env.N, agent.num_skills
+    storage = RolloutStorage(steps, N, env.state_dim, 28, K if agent.conditional else 0)
+    pairs = torch.zeros(steps, N, agent.disc.norm.mean.shape[0])
+    cond_all = torch.zeros(steps, N, K)
+    cmd_a = torch.zeros(steps, N, dtype=torch.long)
+    cmd_b = torch.zeros(steps, N, dtype=torch.long)
+    w = torch.zeros(steps, N)
+    r_goal = torch.zeros(steps, N)
+    bootstrap = torch.zeros(steps, N)
+    lengths = []
+    unstable = falls = 0
+    for t in range(steps):
+        obs = torch.as_tensor(env.state, dtype=torch.float32)
+        blend = torch.as_tensor(env.command_blend(), dtype=torch.float32)
+        cond = blend if agent.conditional else None
+        action, logp, value = agent.model.act(obs, cond, deterministic=deterministic)
+        o_t = env.obs.copy()
+        cmd_a[t], cmd_b[t], w[t], cond_all[t] = torch.from_numpy(env.prev_cmd), torch.from_numpy(env.cmd), torch.from_numpy(env.w), blend
+        steps_before = env.steps.copy()
+        res = env.step(action.numpy().astype(np.float64))
+        pairs[t] = torch.from_numpy(np.concatenate([o_t, res.pair_next], axis=1))
+        r_goal[t] = torch.from_numpy(res.r_goal)
+        done = res.terminated | res.truncated
+        if res.truncated.any():
+            idx = np.flatnonzero(res.truncated)
+            fs = torch.as_tensor(res.final_state[idx], dtype=torch.float32)
+            with torch.no_grad():
+                v_final = agent.model.value(fs, blend[idx] if agent.conditional else None)
+            bootstrap[t, idx] = agent.cfg.ppo.gamma * v_final
+        storage.add(obs, blend if agent.conditional else None, action, logp, value, torch.zeros(N), torch.from_numpy(done))
+        lengths += list(steps_before[done] + 1)
+        unstable += int(res.unstable.sum())
+        falls += int((res.terminated & ~res.unstable).sum())
+    return Rollout(storage, pairs, cond_all, cmd_a, cmd_b, w, r_goal, bootstrap, lengths, unstable, falls)
+
+
+@torch.no_grad()
+def discriminator_rewards(agent: Agent, ro: Rollout) -> dict[str, torch.Tensor]:
+    """r_S, r_C (blended) and class probabilities for every rollout pair, in one forward."""
+    T, N = ro.pairs.shape[:2]
+    d, logits = agent.disc(ro.pairs.reshape(T * N, -1))
+    out = {"d": d.reshape(T, N), "r_style": style_reward(d).reshape(T, N)}
+    if logits is not None:
+        probs = F.softmax(logits, dim=-1)
+        out["probs"] = probs.reshape(T, N, -1)
+        out["r_class"] = blended_class_reward(probs, ro.cmd_a.reshape(-1), ro.cmd_b.reshape(-1), ro.w.reshape(-1), agent.num_skills).reshape(T, N)
+    return out
+
+
+def total_reward(agent: Agent, rewards: dict, r_goal: torch.Tensor) -> torch.Tensor:
+    """r = w_S r_S + w_C r_C + w_G r_G (eq 4.1); AMP baseline: no r_C."""
+    rc = agent.cfg.reward
+    r = rc.w_style * rewards["r_style"] + rc.w_goal * r_goal
+    if agent.conditional:
+        r = r + rc.w_class * rewards["r_class"]
+    return r
+
+
+# ---------------------------------------------------------------------------- discriminator update
+def update_discriminator(agent: Agent, ro: Rollout, rng: np.random.Generator) -> dict[str, float]:
+    cfg = agent.cfg.disc
+    K = agent.num_skills
+    fresh_pairs = ro.pairs.reshape(-1, ro.pairs.shape[-1])
+    fresh_cond = ro.cond.reshape(-1, K)
+    stats: dict[str, float] = {}
+    for _ in range(cfg.steps_per_iter):
+        demo, labels = agent.demos.sample(cfg.batch_size, rng)
+        demo = torch.from_numpy(demo)
+        labels = torch.from_numpy(labels)
+        n_replay = int(cfg.batch_size * cfg.replay_fraction) if agent.replay.size > 0 else 0
+        idx = torch.randint(0, fresh_pairs.shape[0], (cfg.batch_size - n_replay,), generator=agent.generator)
+        pol, pol_c = fresh_pairs[idx], fresh_cond[idx]
+        if n_replay:
+            rp, rc = agent.replay.sample(n_replay, agent.generator)
+            pol, pol_c = torch.cat([pol, rp]), torch.cat([pol_c, rc])
+        demo_n = agent.disc.norm(demo)
+        d_data, c_data = agent.disc(demo_n, normalized=True)
+        d_pol, c_pol = agent.disc(pol)
+        l_style = style_loss(d_data, d_pol)
+        l_gp = gradient_penalty(agent.disc, demo_n, cfg.w_gp)
+        loss = l_style + l_gp
+        l_cls = torch.zeros(())
+        if agent.conditional:
+            kind = agent.cfg.cgail.class_loss
+            l_cls = class_loss(c_data, F.one_hot(labels, K).float(), kind) + class_loss(c_pol, pol_c, kind)
+            loss = loss + cfg.w_class_loss * l_cls
+        agent.disc_opt.zero_grad(set_to_none=True)
+        loss.backward()
+        agent.disc_opt.step()
+        with torch.no_grad():
+            step_stats = {"losses/disc_style": float(l_style), "losses/disc_gp": float(l_gp), "losses/disc_class": float(l_cls),
+                          "train/disc_acc_data": float((d_data > 0).float().mean()), "train/disc_acc_policy": float((d_pol < 0).float().mean())}
+            if agent.conditional:
+                step_stats["train/class_acc_data"] = float((c_data.argmax(-1) == labels).float().mean())
+        for k, v in step_stats.items():
+            stats[k] = stats.get(k, 0.0) + v / cfg.steps_per_iter
+    agent.replay.add(fresh_pairs, fresh_cond)
+    return stats
+
+
+def class_accuracy_on_policy(agent: Agent, ro: Rollout, probs: torch.Tensor) -> dict[str, float]:
+    """Accuracy of the classifier on policy pairs outside transitions (w = 1), overall and per skill."""
+    pred = probs.argmax(-1)
+    steady = ro.w >= 1.0
+    out = {}
+    correct = (pred == ro.cmd_b) & steady
+    out["train/class_acc_policy"] = float(correct.sum() / steady.sum().clamp(min=1))
+    for k, s in enumerate(agent.skills):
+        m = steady & (ro.cmd_b == k)
+        if m.any():
+            out[f"class_acc_policy/{s.name}"] = float(((pred == k) & m).sum() / m.sum())
+    return out
+
+
+# ---------------------------------------------------------------------------- main loop
+def train(cfg, run) -> dict:
+    from charctl.progress import TrainingProgress
+    from charctl.runs import StopFlag
+
+    torch.set_num_threads(int(cfg.train.torch_threads))
+    agent = build_agent(cfg)
+    env = CgailEnv(agent.skills, cfg.env, seed=cfg.seed, conditional=agent.conditional)
+    if run.resumed:
+        load_agent_state(agent, run.load_checkpoint(agent.signature()), env)
+    rng = np.random.default_rng(cfg.seed + 7919 * (agent.iteration + 1))
+    samples_per_iter = cfg.train.rollout_steps * env.N
+    total = int(cfg.train.total_samples)
+    if agent.samples >= total:
+        raise CharctlError(f"{run.dir} already reached train.total_samples={total}; raise it to continue (train.total_samples=...)")
+    last: dict = {}
+    ep_lengths: list = []
+    t_start = time.perf_counter()
+    with StopFlag() as stop, TrainingProgress(total, f"cgail ({'cGAIL' if agent.conditional else 'AMP'}, {agent.num_skills} skills)") as bar:
+        bar.update(agent.samples)
+        while agent.samples < total:
+            t0 = time.perf_counter()
+            ro = collect_rollout(agent, env, cfg.train.rollout_steps)
+            t1 = time.perf_counter()
+            rew = discriminator_rewards(agent, ro)
+            reward = total_reward(agent, rew, ro.r_goal) + ro.bootstrap
+            ro.storage.rewards = reward
+            agent.model.obs_norm.update(ro.storage.obs)
+            with torch.no_grad():
+                last_v = agent.model.value(torch.as_tensor(env.state, dtype=torch.float32), torch.as_tensor(env.command_blend(), dtype=torch.float32) if agent.conditional else None)
+            ro.storage.finish(last_v, cfg.ppo.gamma, cfg.ppo.lam)
+            t2 = time.perf_counter()
+            ppo_stats = agent.ppo.update(ro.storage)
+            t3 = time.perf_counter()
+            disc_stats = update_discriminator(agent, ro, rng)
+            t4 = time.perf_counter()
+            agent.iteration += 1
+            agent.samples += samples_per_iter
+            agent.unstable_total += ro.unstable
+            ep_lengths = (ep_lengths + list(ro.episode_lengths))[-200:]
+            stats = {**ppo_stats, **disc_stats,
+                     "train/r_style": float(rew["r_style"].mean()), "train/r_goal": float(ro.r_goal.mean()),
+                     "train/reward": float(reward.mean()), "train/episode_length": float(np.mean(ep_lengths)) if ep_lengths else float(cfg.train.rollout_steps),
+                     "train/unstable_resets_total": agent.unstable_total, "train/falls": ro.falls,
+                     "perf/samples_per_s": samples_per_iter / (t4 - t0), "perf/rollout_samples_per_s": samples_per_iter / (t1 - t0),
+                     "perf/frac_rollout": (t1 - t0) / (t4 - t0), "perf/frac_reward": (t2 - t1) / (t4 - t0),
+                     "perf/frac_ppo": (t3 - t2) / (t4 - t0), "perf/frac_disc": (t4 - t3) / (t4 - t0)}
+            if agent.conditional:
+                stats["train/r_class"] = float(rew["r_class"].mean())
+                stats.update(class_accuracy_on_policy(agent, ro, rew["probs"]))
+            if agent.iteration % cfg.train.log_every == 0:
+                run.log_scalars(stats, agent.samples)
+            last = stats
+            bar.update(samples_per_iter, r_S=stats["train/r_style"], **({"acc_pol": stats["train/class_acc_policy"]} if agent.conditional else {}), ep_len=stats["train/episode_length"])
+            if agent.iteration % cfg.train.checkpoint_every == 0:
+                run.save_checkpoint(agent_state(agent, env), agent.signature())
+            if stop.requested:
+                print(f"\ninterrupted: checkpoint written at iteration {agent.iteration}; continue with --resume {run.dir}")
+                break
+    run.save_checkpoint(agent_state(agent, env), agent.signature())
+    wall = time.perf_counter() - t_start
+    metrics = {"iterations": agent.iteration, "samples": agent.samples, "wall_s": round(wall, 1),
+               "skills": [s.name for s in agent.skills], "conditional": agent.conditional,
+               **{(k.split("/", 1)[1] if k.startswith(("train/", "perf/")) else k.replace("/", "_")): v
+                  for k, v in last.items() if k.startswith(("train/", "perf/", "class_acc_policy/"))}}
+    run.write_metrics(metrics)
+    return metrics

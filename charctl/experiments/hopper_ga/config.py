@@ -1,0 +1,200 @@
+"""Structured config of the hopper-ga experiment (SPEC §5, Kang 1999). Values here are defaults;
+conf/experiment/hopper-ga.yaml repeats them with the equation each one belongs to, and the scale
+presets live in conf/preset/hopper-ga/. Units: metres, seconds, kilograms, radians."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+from charctl.config import BaseConfig
+
+
+@dataclass
+class HopperConfig:
+    """The planar spring hopper (eq 1-6)."""
+
+    h: float = 0.01  # s, frame step h of eq 2 and eq 10 (paper Fig 3.5/3.7: 0.01)
+    g: float = -9.81  # m/s^2, gravity (negative, as in eq 2 and eq 4)
+    touchdown_vy: float = 0.0  # m/s, HIP vertical speed at the first touchdown (eq 1 gives positions only)
+    periodic: bool = True  # evaluate the steady cycle: touchdown speed = the same cycle's landing speed
+    periodic_tol: float = 0.001  # m/s, |landing - touchdown speed| accepted as periodic
+    periodic_iterations: int = 12  # secant steps after the first hop; no convergence = invalid
+    max_touchdown_speed: float = 8.0  # m/s, search range of the periodic touchdown speed
+    max_stance_s: float = 1.0  # s, a stance that has not lifted off by then is invalid
+    max_flight_s: float = 1.0  # s, a flight time T above this is invalid
+    thigh_fraction: float = 0.5  # |HIP-JOINT| / l; |JOINT-FOOT| = l - |HIP-JOINT| (paper Fig 3.3: knee mid-leg)
+    knee_max_flexion_deg: float = 150.0  # knee flexion limit; a tighter fold (d too short) is invalid
+    ground_tolerance: float = 0.005  # m, a foot lower than -tolerance is "leg through the ground" -> invalid
+
+
+@dataclass
+class SegmentConfig:
+    """One upper-body joint and the segment it moves (eq 8 mass point at `com` along the segment)."""
+
+    name: str = "chest"
+    parent: str = "root"  # "root" = the pelvis
+    offset: list[float] = field(default_factory=lambda: [0.0, 0.1, 0.0])  # m, joint position in the parent's frame
+    direction: list[float] = field(default_factory=lambda: [0.0, 1.0, 0.0])  # unit vector of the segment in the rest pose
+    length: float = 0.45  # m
+    mass: float = 0.355  # fraction of character.mass
+    com: float = 0.5  # COM position along the segment, fraction of its length from the joint
+    axes: str = "zx"  # balance DOFs of this joint: z = sagittal (eq 10-11 zd_b), x = lateral (xd_b)
+
+
+def _default_upper() -> list[SegmentConfig]:
+    # Winter (2009) segment mass fractions; lengths for a ~1.75 m adult.
+    return [
+        SegmentConfig("chest", "root", [0.0, 0.10, 0.0], [0.0, 1.0, 0.0], 0.45, 0.355, 0.5, "zx"),
+        SegmentConfig("neck", "chest", [0.0, 0.45, 0.0], [0.0, 1.0, 0.0], 0.25, 0.081, 0.5, "zx"),
+        SegmentConfig("right_shoulder", "chest", [0.0, 0.40, 0.18], [0.0, -1.0, 0.0], 0.29, 0.028, 0.436, "zx"),
+        SegmentConfig("right_elbow", "right_shoulder", [0.0, -0.29, 0.0], [0.0, -1.0, 0.0], 0.40, 0.022, 0.4, "z"),
+        SegmentConfig("left_shoulder", "chest", [0.0, 0.40, -0.18], [0.0, -1.0, 0.0], 0.29, 0.028, 0.436, "zx"),
+        SegmentConfig("left_elbow", "left_shoulder", [0.0, -0.29, 0.0], [0.0, -1.0, 0.0], 0.40, 0.022, 0.4, "z"),
+    ]
+
+
+@dataclass
+class CharacterConfig:
+    """The 11-joint character (paper Fig 2.1): root (pelvis), chest, neck, 2 x (shoulder, elbow),
+    2 x (hip, knee). Leg segment lengths come from the gene l; everything else is fixed here."""
+
+    mass: float = 70.0  # kg, total body mass (eq 8 M_i = fraction * mass)
+    pelvis_mass: float = 0.142  # fraction; the pelvis mass point sits at HIP
+    hip_half_width: float = 0.09  # m, each hip joint is this far from HIP along z (right = +z)
+    thigh_mass: float = 0.100  # fraction, per leg
+    shank_mass: float = 0.061  # fraction, per leg (shank + foot)
+    thigh_com: float = 0.433  # COM along the thigh from the hip
+    shank_com: float = 0.5  # COM along the shank from the knee
+    upper: list[SegmentConfig] = field(default_factory=_default_upper)
+
+
+@dataclass
+class BoundsConfig:
+    """GA gene bounds [low, high] (the paper gives none; see docs/hopper-ga.md)."""
+
+    l: list[float] = field(default_factory=lambda: [0.75, 1.05])  # m, leg length (human scale)
+    kappa: list[float] = field(default_factory=lambda: [3000.0, 40000.0])  # N/m, spring constant
+    theta0: list[float] = field(default_factory=lambda: [0.1, 0.8])  # rad, touchdown angle (eq 1)
+    m: list[float] = field(default_factory=lambda: [40.0, 100.0])  # kg, HIP mass of eq 2
+    alpha: list[float] = field(default_factory=lambda: [0.55, 1.0])  # eq 6: extremum of B_c at alpha*T
+    swing_angle: list[float] = field(default_factory=lambda: [-1.2, 0.0])  # rad, active leg theta_c at stance start
+    swing_bend: list[float] = field(default_factory=lambda: [0.0, 1.2])  # rad, active leg theta_l at stance start
+    swing_gain: list[float] = field(default_factory=lambda: [0.0, 3.0])  # active theta_c = angle + gain*(theta0 - idle theta_c)
+    bend_gain: list[float] = field(default_factory=lambda: [-2.0, 2.0])  # active theta_l = bend + gain*(theta0 - idle theta_c)
+    eta: list[float] = field(default_factory=lambda: [0.0, 10.0])  # eq 11 response, one gene per balance DOF
+
+
+@dataclass
+class BalanceConfig:
+    angle_limit: float = 1.2  # rad, |balance joint angle| above this = the body folds over -> invalid
+
+
+@dataclass
+class FitnessConfig:
+    """eq 12-14."""
+
+    energy_scale: float = 1000.0  # E_r is reported in units of this (J-like units / m); see docs
+    predict_with_h: bool = True  # gamma's predicted speed is theta_dot_s + theta_ddot_s * h (paper omits h)
+    omega_floor: float = 0.1  # rad/s, softens max/min in gamma when a speed is near zero
+
+
+@dataclass
+class GAConfig:
+    population: int = 100  # paper Fig 5.7: 100 individuals
+    generations: int = 100  # paper Fig 5.7: 100 generations
+    tournament: int = 3  # DEAP selTournament size
+    elite: int = 2  # best individuals copied unchanged into the next generation
+    cxpb: float = 0.7  # crossover probability per pair (DEAP cxSimulatedBinaryBounded)
+    mutpb: float = 0.3  # mutation probability per individual (DEAP mutPolynomialBounded)
+    cx_eta: float = 15.0  # SBX crowding degree
+    mut_eta: float = 20.0  # polynomial mutation crowding degree
+    indpb: float = 0.2  # per-gene mutation probability
+    init_retries: int = 50  # generation 0: re-draw invalid individuals up to this many rounds
+
+
+@dataclass
+class RuntimeConfig:
+    kind: str = "local"  # local (vectorised numpy) | process (multiprocessing pool) | ray
+    workers: int = 2  # process/ray: parallel workers (the population is split into this many chunks)
+    address: str = ""  # ray: cluster address ("" = start Ray on this machine)
+
+
+@dataclass
+class LimpConfig:
+    speed_factor: float = 1.5  # Fig 3.13: HIP speed multiplier while the limping (left) leg supports
+    cycles: int = 8  # cycles simulated for the limp test and the COM path
+
+
+@dataclass
+class ExportConfig:
+    fps: float = 60.0  # BVH / video frame rate
+    seconds: float = 4.0  # length of the exported running motion (whole cycles)
+
+
+@dataclass
+class Config(BaseConfig):
+    experiment: str = "hopper-ga"
+    speed: float = 5.0  # m/s, target running speed = HIP speed x_dot of eq 2-3 (conceptual control parameter)
+    beta: float = 0.0  # briskness, eq 14, 0 <= beta < 1
+    hopper: HopperConfig = field(default_factory=HopperConfig)
+    character: CharacterConfig = field(default_factory=CharacterConfig)
+    balance: BalanceConfig = field(default_factory=BalanceConfig)
+    bounds: BoundsConfig = field(default_factory=BoundsConfig)
+    fitness: FitnessConfig = field(default_factory=FitnessConfig)
+    ga: GAConfig = field(default_factory=GAConfig)
+    runtime: RuntimeConfig = field(default_factory=RuntimeConfig)
+    limp: LimpConfig = field(default_factory=LimpConfig)
+    export: ExportConfig = field(default_factory=ExportConfig)
+
+    @staticmethod
+    def check(cfg) -> str | None:
+        """Cross-field checks; returns a message or None."""
+        if not 0.0 <= cfg.beta < 1.0:
+            return f"beta must satisfy 0 <= beta < 1 (eq 14), got {cfg.beta}"
+        if cfg.speed <= 0:
+            return f"speed must be positive (m/s), got {cfg.speed}"
+        if cfg.hopper.h <= 0 or cfg.hopper.g >= 0:
+            return "hopper.h must be > 0 and hopper.g < 0 (gravity points down, eq 2)"
+        if not 0.2 <= cfg.hopper.thigh_fraction <= 0.5:
+            return f"hopper.thigh_fraction must lie in [0.2, 0.5], got {cfg.hopper.thigh_fraction}"
+        if not 0 < cfg.hopper.knee_max_flexion_deg < 180:
+            return "hopper.knee_max_flexion_deg must lie in (0, 180)"
+        for name in ("l", "kappa", "theta0", "m", "alpha", "swing_angle", "swing_bend", "swing_gain", "bend_gain", "eta"):
+            b = list(getattr(cfg.bounds, name))
+            if len(b) != 2 or not b[0] < b[1]:
+                return f"bounds.{name} must be [low, high] with low < high, got {b}"
+        if cfg.bounds.l[0] <= 0 or cfg.bounds.kappa[0] <= 0 or cfg.bounds.m[0] <= 0:
+            return "bounds of l, kappa and m must be positive"
+        a = cfg.bounds.alpha
+        if a[0] <= 0.5 <= a[1]:
+            return f"bounds.alpha must not contain 0.5 (B_c of eq 6 is singular there), got {list(a)}"
+        if not 0 < cfg.bounds.theta0[1] < math.pi / 2 or cfg.bounds.theta0[0] <= 0:
+            return "bounds.theta0 must lie inside (0, pi/2)"
+        if cfg.ga.population < 4 or cfg.ga.generations < 1:
+            return "ga.population must be >= 4 and ga.generations >= 1"
+        if not 1 <= cfg.ga.elite < cfg.ga.population:
+            return "ga.elite must lie in [1, population) (elitism keeps the best individual)"
+        if cfg.ga.tournament < 1:
+            return "ga.tournament must be >= 1"
+        if cfg.runtime.kind not in ("local", "process", "ray"):
+            return f"runtime.kind must be local, process or ray, got {cfg.runtime.kind!r}"
+        if cfg.runtime.workers < 1:
+            return "runtime.workers must be >= 1"
+        if cfg.fitness.energy_scale <= 0 or cfg.fitness.omega_floor <= 0:
+            return "fitness.energy_scale and fitness.omega_floor must be positive"
+        names = [s.name for s in cfg.character.upper]
+        if len(set(names)) != len(names):
+            return f"character.upper joint names must be unique, got {names}"
+        for s in cfg.character.upper:
+            if s.parent != "root" and s.parent not in names[: names.index(s.name)]:
+                return f"character.upper: {s.name!r} has parent {s.parent!r}, which must be 'root' or an earlier joint"
+            if set(s.axes) - set("zx"):
+                return f"character.upper: {s.name!r} axes must use only 'z' and 'x', got {s.axes!r}"
+            if len(s.offset) != 3 or len(s.direction) != 3:
+                return f"character.upper: {s.name!r} offset and direction must have 3 numbers"
+        if cfg.limp.speed_factor <= 0 or cfg.limp.cycles < 2:
+            return "limp.speed_factor must be > 0 and limp.cycles >= 2"
+        if cfg.export.fps <= 0 or cfg.export.seconds <= 0:
+            return "export.fps and export.seconds must be positive"
+        return None

@@ -1,0 +1,142 @@
+"""Proximal policy optimisation (clipped surrogate) with a Gaussian actor-critic.
+
+One readable file: `PPOConfig` (hyper-parameters, with help text), `ActorCritic` (MLP mean and
+value conditioned on an optional command vector, observation normalisation built in, fixed or
+learned diagonal std), `ppo_losses` (the maths, testable on its own) and `PPO` (minibatch epochs,
+gradient clipping, state dict for checkpoints). Used by cgail (ReLU [1024, 512, 512]) and srb
+(tanh 4 x 64).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import torch
+from torch import nn
+
+from charctl.nn.mlp import RunningNorm, mlp
+from charctl.rl.storage import RolloutStorage
+
+
+@dataclass
+class PPOConfig:
+    """PPO hyper-parameters (defaults: a common PPO setting; experiments set their paper's values)."""
+
+    lr: float = 3e-4  # Adam learning rate of actor and critic
+    gamma: float = 0.99  # discount
+    lam: float = 0.95  # GAE lambda
+    clip: float = 0.2  # surrogate clip range epsilon
+    epochs: int = 5  # passes over each rollout
+    minibatch_size: int = 512  # samples per gradient step
+    value_coef: float = 0.5  # weight of the value loss
+    entropy_coef: float = 0.0  # weight of the entropy bonus (0 with a fixed std)
+    max_grad_norm: float = 1.0  # global gradient-norm clip
+    normalize_advantages: bool = True  # per-minibatch advantage standardisation
+    value_clip: float = 0.0  # >0: PPO2-style value clipping range
+    hidden: list[int] = field(default_factory=lambda: [256, 256])  # MLP widths of actor and critic
+    activation: str = "relu"  # relu | tanh | elu | silu
+    action_std: float = 0.1  # initial std of the Gaussian policy (in action units)
+    learn_std: bool = False  # keep the std fixed (paper) or learn it
+
+
+class ActorCritic(nn.Module):
+    """pi(a | s, c) = N(mu(norm(s), c), diag(std^2)) and V(norm(s), c)."""
+
+    def __init__(self, obs_dim: int, act_dim: int, cfg: PPOConfig, cond_dim: int = 0):
+        super().__init__()
+        self.obs_dim, self.act_dim, self.cond_dim = obs_dim, act_dim, cond_dim
+        self.obs_norm = RunningNorm(obs_dim)
+        self.actor = mlp(obs_dim + cond_dim, cfg.hidden, act_dim, cfg.activation, out_gain=0.01)
+        self.critic = mlp(obs_dim + cond_dim, cfg.hidden, 1, cfg.activation)
+        self.log_std = nn.Parameter(torch.full((act_dim,), math.log(cfg.action_std)), requires_grad=cfg.learn_std)
+
+    def _input(self, obs: torch.Tensor, cond: torch.Tensor | None) -> torch.Tensor:
+        x = self.obs_norm(obs)
+        return x if self.cond_dim == 0 or cond is None else torch.cat([x, cond], dim=-1)
+
+    def mean_action(self, obs: torch.Tensor, cond: torch.Tensor | None = None) -> torch.Tensor:
+        return self.actor(self._input(obs, cond))
+
+    def value(self, obs: torch.Tensor, cond: torch.Tensor | None = None) -> torch.Tensor:
+        return self.critic(self._input(obs, cond)).squeeze(-1)
+
+    def distribution(self, obs: torch.Tensor, cond: torch.Tensor | None = None) -> torch.distributions.Normal:
+        return torch.distributions.Normal(self.mean_action(obs, cond), self.log_std.exp().expand(self.act_dim))
+
+    @torch.no_grad()
+    def act(self, obs: torch.Tensor, cond: torch.Tensor | None = None, deterministic: bool = False):
+        """One batched forward: (actions, log_probs, values)."""
+        x = self._input(obs, cond)
+        mean = self.actor(x)
+        value = self.critic(x).squeeze(-1)
+        std = self.log_std.exp().expand_as(mean)
+        action = mean if deterministic else mean + std * torch.randn_like(mean)
+        logp = torch.distributions.Normal(mean, std).log_prob(action).sum(-1)
+        return action, logp, value
+
+
+def ppo_losses(new_logp: torch.Tensor, old_logp: torch.Tensor, advantages: torch.Tensor, values: torch.Tensor,
+               old_values: torch.Tensor, returns: torch.Tensor, clip: float, value_clip: float = 0.0) -> dict[str, torch.Tensor]:
+    """Clipped surrogate and value losses (to minimise) and diagnostics.
+
+    L_pi = -E[min(rho A, clip(rho, 1-eps, 1+eps) A)], rho = exp(new_logp - old_logp);
+    L_V = E[(V - R)^2] (or the max with the clipped version when value_clip > 0).
+    """
+    ratio = torch.exp(new_logp - old_logp)
+    surr = torch.min(ratio * advantages, torch.clamp(ratio, 1.0 - clip, 1.0 + clip) * advantages)
+    policy_loss = -surr.mean()
+    if value_clip > 0:
+        v_clipped = old_values + torch.clamp(values - old_values, -value_clip, value_clip)
+        value_loss = torch.max((values - returns) ** 2, (v_clipped - returns) ** 2).mean()
+    else:
+        value_loss = ((values - returns) ** 2).mean()
+    clip_frac = ((ratio - 1.0).abs() > clip).float().mean()
+    approx_kl = ((ratio - 1.0) - torch.log(ratio)).mean()
+    return {"policy": policy_loss, "value": value_loss, "clip_frac": clip_frac, "approx_kl": approx_kl}
+
+
+class PPO:
+    """Owns the actor-critic and its optimiser; `update(storage)` runs the minibatch epochs."""
+
+    def __init__(self, model: ActorCritic, cfg: PPOConfig, generator: torch.Generator | None = None):
+        self.model, self.cfg = model, cfg
+        self.optimizer = torch.optim.Adam([p for p in model.parameters() if p.requires_grad], lr=cfg.lr)
+        self.generator = generator
+
+    def update(self, storage: RolloutStorage) -> dict[str, float]:
+        cfg = self.cfg
+        data = storage.flat()
+        n = data["obs"].shape[0]
+        mb = min(cfg.minibatch_size, n)
+        sums: dict[str, float] = {}
+        steps = 0
+        for _ in range(cfg.epochs):
+            perm = torch.randperm(n, generator=self.generator)
+            for start in range(0, n - mb + 1, mb):
+                idx = perm[start : start + mb]
+                obs, cond = data["obs"][idx], data["cond"][idx] if self.model.cond_dim else None
+                adv = data["advantages"][idx]
+                if cfg.normalize_advantages and adv.numel() > 1:
+                    adv = (adv - adv.mean()) / (adv.std() + 1e-8)
+                dist = self.model.distribution(obs, cond)
+                new_logp = dist.log_prob(data["actions"][idx]).sum(-1)
+                values = self.model.value(obs, cond)
+                losses = ppo_losses(new_logp, data["log_probs"][idx], adv, values, data["values"][idx], data["returns"][idx], cfg.clip, cfg.value_clip)
+                entropy = dist.entropy().sum(-1).mean()
+                loss = losses["policy"] + cfg.value_coef * losses["value"] - cfg.entropy_coef * entropy
+                self.optimizer.zero_grad(set_to_none=True)
+                loss.backward()
+                nn.utils.clip_grad_norm_(self.model.parameters(), cfg.max_grad_norm)
+                self.optimizer.step()
+                for k, v in {**losses, "entropy": entropy}.items():
+                    sums[k] = sums.get(k, 0.0) + float(v.detach())
+                steps += 1
+        return {f"losses/{k}": v / max(steps, 1) for k, v in sums.items()}
+
+    def state_dict(self) -> dict:
+        return {"model": self.model.state_dict(), "optimizer": self.optimizer.state_dict()}
+
+    def load_state_dict(self, state: dict) -> None:
+        self.model.load_state_dict(state["model"])
+        self.optimizer.load_state_dict(state["optimizer"])

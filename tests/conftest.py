@@ -1,0 +1,107 @@
+"""Shared fixtures and helpers for the charctl test suite.
+
+Kept small on purpose: experiment test files add their own fixtures next to their tests.
+Helpers here are about the foundation's contract that every command shares: a bad input is a
+one-line `CharctlError` (`error: ...` on stderr, non-zero exit), never a traceback.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+REPO = Path(__file__).resolve().parent.parent
+VENV_BIN = Path(sys.executable).parent
+CHARCTL = VENV_BIN / "charctl"
+
+
+def cli_env(**extra: str) -> dict[str, str]:
+    """Environment for a charctl subprocess: wide, colourless rich output, no GPU/renderer surprises."""
+    env = dict(os.environ)
+    env.update({"COLUMNS": "250", "NO_COLOR": "1", "TERM": "dumb", "OMP_NUM_THREADS": "1"})
+    env.update(extra)
+    return env
+
+
+def run_charctl(*args: str, cwd: Path | None = None, env: dict[str, str] | None = None, timeout: float = 120) -> subprocess.CompletedProcess:
+    """Run the installed `charctl` console script as a user would (text mode, captured output)."""
+    exe = str(CHARCTL) if CHARCTL.exists() else None
+    cmd = [exe, *args] if exe else [sys.executable, "-c", "from charctl.cli import main; main()", *args]
+    return subprocess.run(cmd, cwd=cwd or REPO, env=env or cli_env(), capture_output=True, text=True, timeout=timeout)
+
+
+def assert_one_line_error(res: subprocess.CompletedProcess, *must_contain: str) -> str:
+    """A failed command: non-zero exit, exactly one stderr line starting 'error:', no traceback."""
+    out = res.stdout + res.stderr
+    assert "Traceback" not in out, f"traceback in output:\n{out}"
+    assert res.returncode != 0, f"expected failure, got exit 0:\n{out}"
+    lines = [l for l in res.stderr.splitlines() if l.strip()]
+    assert len(lines) == 1, f"expected exactly one stderr line, got {len(lines)}:\n{res.stderr}"
+    assert lines[0].startswith("error:"), lines[0]
+    for s in must_contain:
+        assert s in lines[0], f"{s!r} not in {lines[0]!r}"
+    return lines[0]
+
+
+def assert_one_line(exc: BaseException, *must_contain: str) -> str:
+    """A raised CharctlError: one non-empty line naming what it must name."""
+    msg = str(exc)
+    assert msg and "\n" not in msg.strip(), f"message is not one line: {msg!r}"
+    for s in must_contain:
+        assert s in msg, f"{s!r} not in {msg!r}"
+    return msg
+
+
+@pytest.fixture
+def charctl_main(capsys):
+    """Call `charctl.cli.main` in this process with the given arguments (same error handling as the
+    console script, without the interpreter start-up); returns a CompletedProcess. An exception that
+    escapes main() (a traceback for the user) propagates and fails the test."""
+
+    def _call(*args: str) -> subprocess.CompletedProcess:
+        from charctl.cli import main
+
+        old = sys.argv
+        sys.argv = ["charctl", *args]
+        capsys.readouterr()
+        try:
+            main()
+            code = 0
+        except SystemExit as exc:
+            code = exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 1)
+        finally:
+            sys.argv = old
+        out, err = capsys.readouterr()
+        return subprocess.CompletedProcess(["charctl", *args], code, out, err)
+
+    return _call
+
+
+@pytest.fixture(scope="session")
+def walk_raw_frames() -> np.ndarray:
+    """The raw (T, 44) frame array of the shipped DeepMimic walk clip, read with plain json."""
+    from charctl.motion.library import motions_dir
+
+    return np.array(json.loads((motions_dir() / "humanoid3d_walk.txt").read_text())["Frames"], dtype=float)
+
+
+@pytest.fixture
+def write_motion(tmp_path):
+    """Write a DeepMimic-style JSON motion file into tmp_path; returns its path."""
+
+    def _write(frames, loop="wrap", name="motion.txt", raw: str | None = None) -> Path:
+        path = tmp_path / name
+        if raw is not None:
+            path.write_text(raw)
+        else:
+            frames = frames.tolist() if isinstance(frames, np.ndarray) else frames
+            path.write_text(json.dumps({"Loop": loop, "Frames": frames}))
+        return path
+
+    return _write

@@ -1,0 +1,156 @@
+"""cgail: reward formulas, transition blend, discriminator pieces, features, smoke training + resume."""
+
+import numpy as np
+import pytest
+import torch
+
+from charctl.experiments.cgail.discriminator import (
+    Discriminator, blended_class_reward, class_loss, class_reward, gradient_penalty, style_loss, style_reward,
+)
+
+torch.set_num_threads(1)
+
+
+def test_style_reward_formula():
+    d = torch.tensor([1.0, -1.0, 0.0, 3.0, -3.0])
+    # 1 - (1 - d)^2 / 4, clipped to [0, 1]
+    assert style_reward(d).tolist() == pytest.approx([1.0, 0.0, 0.75, 0.0, 0.0])
+
+
+def test_class_reward_formula_and_blend():
+    p = torch.tensor([[0.7, 0.2, 0.1]])
+    ca = torch.tensor([[1.0, 0.0, 0.0]])
+    # ||C - c||_1 = 0.3 + 0.2 + 0.1 = 0.6 -> r = 0.4 ; vs class 1: 0.7+0.8+0.1 = 1.6 -> r = 0
+    assert class_reward(p, ca).item() == pytest.approx(0.4)
+    assert class_reward(p, torch.tensor([[0.0, 1.0, 0.0]])).item() == pytest.approx(0.0)
+    # eq 4.11 with w = 0.25: 0.75 * 0.4 + 0.25 * 0
+    r = blended_class_reward(p, torch.tensor([0]), torch.tensor([1]), torch.tensor([0.25]), 3)
+    assert r.item() == pytest.approx(0.3)
+
+
+def test_style_and_class_losses():
+    assert style_loss(torch.tensor([1.0, 1.0]), torch.tensor([-1.0])).item() == pytest.approx(0.0)
+    assert style_loss(torch.tensor([0.0]), torch.tensor([0.0])).item() == pytest.approx(2.0)
+    logits = torch.tensor([[2.0, 0.0]])
+    tgt = torch.tensor([[1.0, 0.0]])
+    p = torch.softmax(logits, -1)
+    assert class_loss(logits, tgt, "ce").item() == pytest.approx(-torch.log(p[0, 0]).item())
+    assert class_loss(logits, tgt, "ls").item() == pytest.approx(((tgt - p) ** 2).sum().item())
+
+
+def test_gradient_penalty_matches_finite_differences():
+    torch.manual_seed(0)
+    disc = Discriminator(6, 2, [16, 16]).double()
+    disc.eval()
+    x = torch.randn(3, 6, dtype=torch.float64)
+    gp = gradient_penalty(disc, x, w_gp=0.5).item()
+    eps = 1e-6
+    sq = []
+    for i in range(3):
+        g = []
+        for j in range(6):
+            e = torch.zeros(6, dtype=torch.float64)
+            e[j] = eps
+            with torch.no_grad():
+                hi = disc(x[i : i + 1] + e, normalized=True)[0]
+                lo = disc(x[i : i + 1] - e, normalized=True)[0]
+            g.append(((hi - lo) / (2 * eps)).item())
+        sq.append(np.sum(np.square(g)))
+    assert gp == pytest.approx(0.25 * np.mean(sq), rel=1e-4)
+
+
+def test_spectral_norm_on_every_discriminator_layer():
+    disc = Discriminator(10, 3, [32, 16, 8])
+    linears = [m for m in disc.modules() if isinstance(m, torch.nn.Linear)]
+    assert len(linears) == 5  # 3 hidden + style head + class head
+    assert all(hasattr(m, "parametrizations") and "weight" in m.parametrizations for m in linears)
+    amp = Discriminator(10, 3, [32], conditional=False)
+    assert amp.class_head is None
+
+
+def test_transition_ramp_blend():
+    from omegaconf import OmegaConf
+
+    from charctl.experiments.cgail.config import EnvConfig, SkillConfig
+    from charctl.experiments.cgail.env import CgailEnv
+    from charctl.experiments.cgail.skills import load_skills
+
+    cfg = OmegaConf.structured(EnvConfig(num_envs=2, ramp_frames=4, switch_prob=0.0))
+    skills = load_skills([SkillConfig("walk", "walk"), SkillConfig("kick", "kick")], 30.0)
+    env = CgailEnv(skills, cfg, seed=0)
+    env.forced_command = np.array([0, 0])
+    env.reset(np.arange(2))
+    env.set_command(np.array([0]), 1, ramp=True)
+    env.set_command(np.array([1]), 1, ramp=False)
+    blends = []
+    for _ in range(5):
+        blends.append(env.command_blend().copy())
+        env._advance_ramp()
+    # env 0 ramps 0 -> 1 over 4 frames; env 1 switches at once
+    assert [b[0, 1] for b in blends] == pytest.approx([0.0, 0.25, 0.5, 0.75, 1.0])
+    assert [b[0].sum() for b in blends] == pytest.approx([1.0] * 5)
+    assert all(b[1, 1] == 1.0 for b in blends)
+
+
+def test_features_agree_between_clip_and_simulator():
+    from charctl.experiments.cgail.features import clip_kinematics, disc_obs, policy_state, sim_kinematics
+    from charctl.motion.library import load_clip
+    from charctl.sim.batch import BatchedHumanoid
+    from charctl.sim.humanoid import clip_to_qpos_qvel
+
+    clip = load_clip("run")
+    kc = clip_kinematics(clip)
+    qpos, qvel = clip_to_qpos_qvel(clip)
+    sim = BatchedHumanoid(3)
+    sim.set_state(np.arange(3), qpos[5:8], qvel[5:8])
+    ks = sim_kinematics(sim)
+    s_clip, s_sim = policy_state(kc)[5:8], policy_state(ks)
+    o_clip, o_sim = disc_obs(kc)[5:8], disc_obs(ks)
+    assert s_sim.shape == (3, 241) and o_sim.shape == (3, 133)
+    # positions and rotations agree exactly; velocities up to finite-difference error
+    np.testing.assert_allclose(s_sim[:, :133], s_clip[:, :133], atol=1e-9)
+    assert np.abs(o_sim - o_clip).mean() < 0.05
+    # heading invariance: turning the character about +y leaves the features unchanged
+    from charctl.motion import rotations as R
+    turn = R.heading_quat(np.array(1.1))
+    q2 = qpos[5:8].copy()
+    q2[:, 3:7] = R.xyzw_to_wxyz(R.multiply(np.broadcast_to(turn, (3, 4)), R.wxyz_to_xyzw(q2[:, 3:7])))
+    q2[:, [0, 2]] = R.rotate(np.broadcast_to(turn, (3, 4)), q2[:, :3])[:, [0, 2]]
+    v2 = qvel[5:8].copy()
+    v2[:, :3] = R.rotate(np.broadcast_to(turn, (3, 4)), v2[:, :3])
+    sim.set_state(np.arange(3), q2, v2)
+    np.testing.assert_allclose(disc_obs(sim_kinematics(sim)), o_sim, atol=1e-9)
+
+
+def test_smoke_training_and_resume(tmp_path):
+    from charctl.commands.train import train_command
+    from charctl.runs import load_checkpoint
+
+    (run_dir,) = train_command("cgail", ["scale=smoke", f"output_root={tmp_path}"])
+    state = load_checkpoint(run_dir / "checkpoints" / "last.pt", "cgail")
+    assert state["iteration"] == 4 and state["samples"] == 512
+    assert (run_dir / "config.yaml").is_file() and (run_dir / "metrics.json").is_file()
+    assert list((run_dir / "tb").glob("events.out.tfevents.*"))
+    train_command("cgail", ["train.total_samples=1024"], resume=run_dir)
+    state2 = load_checkpoint(run_dir / "checkpoints" / "last.pt", "cgail")
+    assert state2["iteration"] == 8 and state2["samples"] == 1024
+    assert state2["replay"]["size"] > state["replay"]["size"]
+
+
+def test_amp_baseline_smoke(tmp_path):
+    from charctl.commands.train import train_command
+    from charctl.runs import load_checkpoint
+
+    (run_dir,) = train_command("cgail", ["scale=smoke", "cgail.conditional=false", f"output_root={tmp_path}"])
+    state = load_checkpoint(run_dir / "checkpoints" / "last.pt", "cgail")
+    assert not any(k.startswith("class_head") for k in state["disc"])
+    assert state["ppo"]["model"]["actor.0.weight"].shape[1] == 243  # no command input
+
+
+def test_wrong_checkpoint_is_one_line_error(tmp_path):
+    from charctl.commands.train import train_command
+    from charctl.errors import CharctlError
+
+    (run_dir,) = train_command("cgail", ["scale=smoke", f"output_root={tmp_path}"])
+    with pytest.raises(CharctlError, match="hidden"):
+        train_command("cgail", ["ppo.hidden=[16]", "train.total_samples=2048"], resume=run_dir)
