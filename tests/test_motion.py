@@ -17,7 +17,7 @@ from scipy.spatial.transform import Rotation, Slerp
 from charctl.errors import CharctlError
 from charctl.motion import rotations as R
 from charctl.motion.clip import Clip
-from charctl.motion.deepmimic import FRAME_SIZE, LAYOUT, decode_frames, encode_frames, read_deepmimic
+from charctl.motion.deepmimic import FRAME_SIZE, LAYOUT, decode_frames, encode_frames
 from charctl.motion.library import catalogue, clip_names, load_clip
 from charctl.motion.skeleton import BODY_NAMES, CLIP_JOINTS, HINGE_JOINTS, load_skeleton, humanoid_urdf_path
 

@@ -203,11 +203,11 @@ def write_bvh(clip: Clip, path: str | Path, fps: float | None = None) -> Path:
             emit(c, depth + 1)
         if not children[b]:
             e = _END_SITES.get(skel.names[b], (0.0, 0.05, 0.0))
-            lines += [f"{pad}\tEnd Site", pad + "\t{", f"{pad}\t\tOFFSET {e[0]:.6f} {e[1]:.6f} {e[2]:.6f}", pad + "\t}"]
+            lines.extend([f"{pad}\tEnd Site", pad + "\t{", f"{pad}\t\tOFFSET {e[0]:.6f} {e[1]:.6f} {e[2]:.6f}", pad + "\t}"])
         lines.append(pad + "}")
 
     emit(0, 0)
-    order = _dfs_order(children)
+    order = list(skel.dfs_order)
     T, B = clip.num_frames, skel.num_bodies
     euler = Rotation.from_quat(clip.local_rot[:, order].reshape(-1, 4)).as_euler("ZYX", degrees=True).reshape(T, B, 3)
     data = np.concatenate([clip.root_pos, euler.reshape(T, -1)], axis=1)
@@ -219,15 +219,3 @@ def write_bvh(clip: Clip, path: str | Path, fps: float | None = None) -> Path:
     tmp.write_text("\n".join(lines) + "\n")
     tmp.replace(path)
     return path
-
-
-def _dfs_order(children: dict[int, list[int]]) -> list[int]:
-    out: list[int] = []
-
-    def visit(b: int) -> None:
-        out.append(b)
-        for c in children[b]:
-            visit(c)
-
-    visit(0)
-    return out

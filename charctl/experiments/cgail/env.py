@@ -50,6 +50,8 @@ class CgailEnv:
         self.steps = np.zeros(self.N, dtype=np.int64)
         self.goal_angle = np.zeros(self.N)  # world yaw of the heading goal (radians about +y)
         self.forced_command: np.ndarray | None = None  # evaluation: fixed command per env (-1 = random)
+        self.start_frame: int | None = None  # evaluation: RSI from this clip frame instead of a random one
+        self.random_yaw = True  # RSI turns the character by a random yaw (training); off for evaluation
         self.has_goal = np.array([s.heading_goal for s in skills])
         self.speed = np.array([s.mean_speed for s in skills])
         self.rest = np.zeros(self.sim.layout.nu)
@@ -117,9 +119,11 @@ class CgailEnv:
             m = skill == k
             data = self.skills[k]
             frames = self.rng.integers(0, len(data.qpos) - 1, size=int(m.sum()))
+            if self.start_frame is not None:
+                frames[:] = min(self.start_frame, len(data.qpos) - 1)
             qpos[m] = data.qpos[frames]
             qvel[m] = data.qvel[frames]
-        yaw = self.rng.uniform(-np.pi, np.pi, size=len(ids))
+        yaw = self.rng.uniform(-np.pi, np.pi, size=len(ids)) if self.random_yaw else np.zeros(len(ids))
         turn = R.heading_quat(yaw)
         qpos[:, [0, 2]] = 0.0
         root = R.wxyz_to_xyzw(qpos[:, 3:7])

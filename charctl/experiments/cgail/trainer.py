@@ -120,7 +120,21 @@ class Rollout:
 
 
 def collect_rollout(agent: Agent, env: CgailEnv, steps: int, deterministic: bool = False) -> Rollout:
-    """Step all envs `steps` times with one batched policy forward per step."""
+    """Step all envs `steps` times with one batched policy forward per step.
+
+    The per-step policy forward is small (num_envs rows): it runs on one torch thread, which
+    avoids thread wake-up latency that costs more than the matmul itself on a busy machine;
+    MuJoCo's batch threads do the parallel work here.
+    """
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    try:
+        return _collect_rollout(agent, env, steps, deterministic)
+    finally:
+        torch.set_num_threads(threads)
+
+
+def _collect_rollout(agent: Agent, env: CgailEnv, steps: int, deterministic: bool) -> Rollout:
     N, K = env.N, agent.num_skills
     storage = RolloutStorage(steps, N, env.state_dim, 28, K if agent.conditional else 0)
     pairs = torch.zeros(steps, N, agent.disc.norm.mean.shape[0])

@@ -66,7 +66,7 @@ class DataConfig:
 class ComConfig:
     mass_table: dict[str, float] = field(default_factory=lambda: dict(PAPER_MASS_TABLE))  # paper Table 1
     humanoid_bodies: dict[str, str] = field(default_factory=lambda: dict(HUMANOID_BODIES))  # part -> humanoid body
-    bvh_joints: dict[str, str] = field(default_factory=dict)  # part -> BVH joint name (empty: the part names themselves)
+    bvh_joints: dict[str, str] = field(default_factory=lambda: {k: k for k in PAPER_MASS_TABLE})  # part -> BVH joint name
 
 
 @dataclass

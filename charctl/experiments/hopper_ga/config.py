@@ -19,8 +19,9 @@ class HopperConfig:
     touchdown_vy: float = 0.0  # m/s, HIP vertical speed at the first touchdown (eq 1 gives positions only)
     periodic: bool = True  # evaluate the steady cycle: touchdown speed = the same cycle's landing speed
     periodic_tol: float = 0.001  # m/s, |landing - touchdown speed| accepted as periodic
-    periodic_iterations: int = 12  # secant steps after the first hop; no convergence = invalid
-    max_touchdown_speed: float = 8.0  # m/s, search range of the periodic touchdown speed
+    periodic_scan: int = 9  # touchdown speeds scanned in [-max_touchdown_speed, 0] for a sign change
+    periodic_iterations: int = 12  # regula-falsi steps in the bracket; no convergence = invalid
+    max_touchdown_speed: float = 6.0  # m/s, search range of the periodic touchdown speed
     max_stance_s: float = 1.0  # s, a stance that has not lifted off by then is invalid
     max_flight_s: float = 1.0  # s, a flight time T above this is invalid
     thigh_fraction: float = 0.5  # |HIP-JOINT| / l; |JOINT-FOOT| = l - |HIP-JOINT| (paper Fig 3.3: knee mid-leg)

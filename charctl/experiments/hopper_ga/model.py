@@ -63,6 +63,7 @@ class Settings:
     periodic: bool
     periodic_tol: float  # m/s
     periodic_iterations: int
+    periodic_scan: int
     max_touchdown_speed: float  # m/s
     max_stance_steps: int
     max_flight_s: float
@@ -100,6 +101,7 @@ def settings_from_config(cfg, speed: float | None = None, beta: float | None = N
         periodic=bool(cfg.hopper.periodic),
         periodic_tol=float(cfg.hopper.periodic_tol),
         periodic_iterations=int(cfg.hopper.periodic_iterations),
+        periodic_scan=max(3, int(cfg.hopper.periodic_scan)),
         max_touchdown_speed=float(cfg.hopper.max_touchdown_speed),
         max_stance_steps=max(3, int(round(cfg.hopper.max_stance_s / cfg.hopper.h))),
         max_flight_s=float(cfg.hopper.max_flight_s),
@@ -132,6 +134,9 @@ class Params:
     bend_gain: np.ndarray  # d theta_l(active) / d(theta0 - theta_c(idle)) during stance
     eta: np.ndarray  # (N, D) eq 11 response per balance DOF
     bad: np.ndarray  # (N,) bool: non-finite or out of bounds
+
+    def take(self, rows: np.ndarray) -> "Params":
+        return Params(**{k: v[rows] for k, v in self.__dict__.items()})
 
 
 def decode(genomes: np.ndarray, s: Settings) -> Params:
@@ -241,30 +246,47 @@ def landing_speed_error(vy_td, l, kappa, theta0, m, xdot, s: "Settings", d_min) 
 
 
 def periodic_touchdown(l, kappa, theta0, m, xdot, s: "Settings", d_min) -> tuple[np.ndarray, np.ndarray]:
-    """Touchdown vertical speed (m/s) of the steady running cycle, and a mask of rows that have one.
+    """Touchdown vertical speed v (m/s, <= 0) of the steady running cycle, and a mask of the rows
+    that have one: G(v) = landing speed - v = 0, so that the next touchdown repeats this one.
 
-    Starts like the paper's simulation, from eq 1 with vertical speed hopper.touchdown_vy, hops
-    once (v1 = landing speed of the first cycle), then solves G(v) = 0 with secant steps; rows
-    whose iterate leaves the physically possible region, or that do not converge within
-    hopper.periodic_iterations, have no periodic gait. Each row is solved independently."""
+    G is scanned on hopper.periodic_scan speeds in [-max_touchdown_speed, 0] (denser near 0);
+    the sign change closest to v = 0 (the gentlest periodic gait) is refined by regula falsi
+    (Illinois variant) for hopper.periodic_iterations steps. Rows without a sign change, or that
+    do not reach |G| < periodic_tol, have no periodic gait. Each row is solved independently."""
     N = l.shape[0]
-    v0 = np.full(N, s.touchdown_vy)
-    g0 = landing_speed_error(v0, l, kappa, theta0, m, xdot, s, d_min)
-    v1 = v0 + np.nan_to_num(g0)
-    g1 = np.where(np.isnan(g0), np.nan, landing_speed_error(v1, l, kappa, theta0, m, xdot, s, d_min))
-    done = np.abs(g1) < s.periodic_tol
+    args = (l, kappa, theta0, m, xdot)
+    grid = -s.max_touchdown_speed * (np.arange(s.periodic_scan) / (s.periodic_scan - 1)) ** 2  # 0 ... -vmax
+    G = np.stack([landing_speed_error(np.full(N, v), *args, s, d_min) for v in grid], 1)  # (N, n)
+    # bracket [grid[j+1], grid[j]] with G(grid[j]) < 0 < G(grid[j+1]); first j from v = 0
+    change = (G[:, :-1] < 0) & (G[:, 1:] > 0)
+    has = change.any(axis=1)
+    j = np.argmax(change, axis=1)
+    rows = np.arange(N)
+    hi_v, hi_g = grid[j], G[rows, j]  # G < 0 side (faster landing than touchdown)
+    lo_v, lo_g = grid[j + 1], G[rows, j + 1]  # G > 0 side
+    v = np.where(has, hi_v, 0.0)
+    g = np.where(has, hi_g, np.nan)
+    done = has & (np.abs(g) < s.periodic_tol)
+    side = np.zeros(N, dtype=int)
     for _ in range(s.periodic_iterations):
-        todo = np.flatnonzero(~done & ~np.isnan(g1))
+        todo = np.flatnonzero(has & ~done)
         if len(todo) == 0:
             break
-        slope = (g1[todo] - g0[todo]) / (v1[todo] - v0[todo])
-        step = np.where(np.abs(slope) > 1e-9, -g1[todo] / np.where(np.abs(slope) > 1e-9, slope, 1.0), g1[todo])
-        v2 = np.clip(v1[todo] + step, -s.max_touchdown_speed, s.max_touchdown_speed)
-        g2 = landing_speed_error(v2, l[todo], kappa[todo], theta0[todo], m[todo], xdot[todo], s, d_min[todo])
-        v0[todo], g0[todo] = v1[todo], g1[todo]
-        v1[todo], g1[todo] = v2, g2
-        done[todo] = np.abs(g2) < s.periodic_tol
-    return v1, done
+        a_v, a_g, b_v, b_g = lo_v[todo], lo_g[todo], hi_v[todo], hi_g[todo]
+        v_new = (a_v * b_g - b_v * a_g) / (b_g - a_g)
+        g_new = landing_speed_error(v_new, *(x[todo] for x in args), s, d_min[todo])
+        bad = np.isnan(g_new)
+        has[todo[bad]] = False
+        pos = g_new > 0
+        # Illinois: halve the stale end's value when the same end is kept twice
+        lo_v[todo] = np.where(pos, v_new, a_v)
+        lo_g[todo] = np.where(pos, g_new, np.where(side[todo] == -1, a_g / 2, a_g))
+        hi_v[todo] = np.where(pos, b_v, v_new)
+        hi_g[todo] = np.where(pos, np.where(side[todo] == 1, b_g / 2, b_g), g_new)
+        side[todo] = np.where(pos, 1, -1)
+        v[todo], g[todo] = v_new, g_new
+        done[todo] = ~bad & (np.abs(g_new) < s.periodic_tol)
+    return v, has & done
 
 
 def b_curve(tau, T, alpha) -> np.ndarray:
@@ -291,6 +313,11 @@ class Cycle:
     T: np.ndarray  # (N,) flight time
     xdot: np.ndarray  # (N,)
     code: np.ndarray  # (N,) invalidity bits
+
+    def take(self, rows: np.ndarray) -> "Cycle":
+        """The cycles of `rows`, cropped to their own longest cycle."""
+        K = int(self.end[rows].max()) + 1 if len(rows) else 1
+        return Cycle(**{k: (v[rows, :K] if v.ndim >= 2 else v[rows]) for k, v in self.__dict__.items()})
 
 
 def leg_cycle(p: Params, s: Settings, xdot: np.ndarray | float | None = None) -> Cycle:
@@ -625,12 +652,19 @@ class Rollout:
     code: np.ndarray
 
 
-def simulate(genomes: np.ndarray, s: Settings) -> Rollout:
-    """One evaluation cycle (stance start -> end of flight) for every genome row."""
+def simulate(genomes: np.ndarray, s: Settings) -> tuple[Rollout | None, Params, np.ndarray, np.ndarray]:
+    """One evaluation cycle (stance start -> end of flight) for every genome row.
+
+    Returns (rollout of the rows whose legs are physically possible, or None; the params of all
+    rows; the invalidity code of all rows; the indices of the rolled-out rows). The balance
+    model (the expensive part) runs only on rows whose legs are valid."""
     p = decode(genomes, s)
     c = leg_cycle(p, s)
-    tl = single_cycle_timeline(c, p, s)
-    return _finish(p, tl, c.code, s)
+    rows = np.flatnonzero(c.code == 0)
+    if len(rows) == 0:
+        return None, p, c.code, rows
+    ps, cs = p.take(rows), c.take(rows)
+    return _finish(ps, single_cycle_timeline(cs, ps, s), cs.code, s), p, c.code, rows
 
 
 def _finish(p: Params, tl: Timeline, code: np.ndarray, s: Settings) -> Rollout:
@@ -644,26 +678,28 @@ def evaluate_genomes(genomes: np.ndarray, s: Settings) -> dict[str, np.ndarray]:
     """Fitness of each genome row (eq 12-14): eval (inf for physically impossible individuals),
     gamma, E_r, E, plus the gait numbers. Row results never depend on the other rows."""
     with np.errstate(all="ignore"):
-        r = simulate(genomes, s)
-        tl = r.timeline
-        gamma = smoothness(r.theta, tl.dt, tl.lift, s)
-        E_r = energy_rate(r.theta, tl, r.balance.com, dof_inertia(r.params.l, s), s)
-        E = energy_target_error(E_r, s.beta)
-        score = eval_score(gamma, E)
-        finite = np.isfinite(score) & np.isfinite(gamma) & np.isfinite(E_r)
-        code = r.code | np.where(finite, 0, BAD_GENE)
+        r, p, code, rows = simulate(genomes, s)
+        N = p.l.shape[0]
+        out = {k: np.full(N, np.nan) for k in ("gamma", "E_r", "E", "stance_time", "flight_time", "step_length")}
+        code = code.copy()
+        if r is not None:
+            tl = r.timeline
+            gamma = smoothness(r.theta, tl.dt, tl.lift, s)
+            E_r = energy_rate(r.theta, tl, r.balance.com, dof_inertia(r.params.l, s), s)
+            sub = np.arange(len(rows))
+            stance_time = tl.t[sub, tl.lift]
+            values = {
+                "gamma": gamma,
+                "E_r": E_r,
+                "E": energy_target_error(E_r, s.beta),
+                "stance_time": stance_time,
+                "flight_time": tl.t[sub, tl.end] - stance_time,
+                "step_length": tl.hip[sub, tl.end, 0] - tl.hip[:, 0, 0],  # HIP travel = foot-to-foot distance
+            }
+            for k, v in values.items():
+                out[k][rows] = v
+            code[rows] = r.code
+        score = eval_score(out["gamma"], out["E"])
+        code |= np.where(np.isfinite(score) | (code != 0), 0, BAD_GENE)
         valid = code == 0
-        rows = np.arange(tl.mask.shape[0])
-        stance_time = tl.t[rows, tl.lift]
-        cycle_time = tl.t[rows, tl.end]
-    return {
-        "fitness": np.where(valid, score, np.inf),
-        "gamma": gamma,
-        "E_r": E_r,
-        "E": E,
-        "valid": valid,
-        "code": code,
-        "stance_time": stance_time,
-        "flight_time": cycle_time - stance_time,
-        "step_length": tl.hip[rows, tl.end, 0] - tl.hip[:, 0, 0],  # HIP travel = foot-to-foot distance
-    }
+    return {"fitness": np.where(valid, score, np.inf), "valid": valid, "code": code, **out}

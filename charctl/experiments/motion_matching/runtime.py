@@ -92,6 +92,17 @@ class Controller:
         return out
 
 
+def accumulate_root(g0: np.ndarray, h0: float, steps: np.ndarray, dh: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Global ground positions (n, 2) and headings (n,) after n root deltas from (g0, h0).
+
+    steps (n, 2): ground step (fwd, lat) in the local frame of the frame it starts from (m);
+    dh (n,): heading change (rad). Step k is rotated by the heading before it.
+    """
+    h = h0 + np.concatenate([[0.0], np.cumsum(dh)])
+    moves = rotate_ground(steps, h[:-1])
+    return g0 + np.cumsum(moves, axis=0), h[1:]
+
+
 def initial_frame(db: Database, traj_query: np.ndarray) -> int:
     """The searchable frame whose trajectory features best match the first desired trajectory."""
     P = db.layout.pose_dims
@@ -140,10 +151,7 @@ def run_path(db: Database, index, path: TargetPath, cfg, with_pose: bool = True,
         n = int(min(interval, T - 1 - t, stop - best))
         seg = np.arange(best, best + n)  # frames stepped from; frames best+1 .. best+n are shown
         steps, dh = blend.segment(cur, best, n)
-        h = heading[t] + np.concatenate([[0.0], np.cumsum(dh)])
-        moves = rotate_ground(steps, h[:-1])
-        heading[t + 1:t + n + 1] = h[1:]
-        ground[t + 1:t + n + 1] = ground[t] + np.cumsum(moves, axis=0)
+        ground[t + 1:t + n + 1], heading[t + 1:t + n + 1] = accumulate_root(ground[t], heading[t], steps, dh)
         frames[t + 1:t + n + 1] = seg + 1
         t += n
         cur = best + n
@@ -168,6 +176,7 @@ class PoseBlend:
         self.h_off = self.h_vel = 0.0
         self.m_off = np.zeros(3)  # root motion offsets (step fwd, step lat, dheading) per frame
         self.m_vel = np.zeros(3)
+        self.motion = np.concatenate([db.step_local, db.step_heading[:, None]], axis=1) if root else None
         self.poses: list[np.ndarray] = [db.pose[start:start + 1]]
         self.heights: list[np.ndarray] = [db.height[start:start + 1]]
 
@@ -179,7 +188,7 @@ class PoseBlend:
         steps, dh = db.step_local[src], db.step_heading[src]
         if self.root:
             # the offset applies to the next step; at a transition it keeps the step that would have come next
-            motion = np.concatenate([db.step_local, db.step_heading[:, None]], axis=1)
+            motion = self.motion
             x_src = motion[cur] + self.m_off
             v_src = (motion[min(cur + 1, db.num_frames - 1)] - motion[cur]) / dt + self.m_vel
             v_dst = (motion[best + 1] - motion[best]) / dt

@@ -172,7 +172,7 @@ def bvh_sources(cfg) -> tuple[list[SourceMotion], SkeletonInfo]:
     for f, m in zip(files, motions):
         trans, rot = m.local_transforms()
         trans, rot = resample_motion(trans * scale, rot, m.fps, cfg.data.fps)
-        fps = cfg.data.fps if trans.shape[0] > 1 else m.fps
+        fps = m.fps if abs(m.fps - cfg.data.fps) <= 1e-3 * cfg.data.fps else cfg.data.fps
         pos = generic_fk(m.parents, trans, rot)
         if pos.shape[0] < 3:
             raise CharctlError(f"{f}: too few frames ({pos.shape[0]})")
@@ -187,7 +187,7 @@ def bvh_sources(cfg) -> tuple[list[SourceMotion], SkeletonInfo]:
 def resample_motion(trans: np.ndarray, rot: np.ndarray, fps: float, new_fps: float) -> tuple[np.ndarray, np.ndarray]:
     """Resample (T, J, 3) translations (linear) and (T, J, 4) rotations (slerp) to `new_fps`."""
     T = trans.shape[0]
-    if T < 2 or abs(fps - new_fps) < 1e-9:
+    if T < 2 or abs(fps - new_fps) <= 1e-3 * new_fps:  # same rate up to rounding of the frame time
         return trans, rot
     duration = (T - 1) / fps
     n_new = max(2, int(round(duration * new_fps)) + 1)

@@ -29,6 +29,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from charctl.experiments.srb import fastmath as F
 from charctl.experiments.srb.qp import N_POINTS, QPBatch, QPParams, solve_batch
 from charctl.experiments.srb.reference import Reference, box_half_extents, build_reference, composite_inertia, sole_points_local
 from charctl.motion import rotations as R
@@ -57,13 +58,12 @@ def make_body(clip, mass: float, frame: int = 0) -> Body:
 
 
 def heading_of(rot: np.ndarray) -> np.ndarray:
-    return R.yaw_about_y(rot)
+    return F.yaw_of(rot)
 
 
 def tilt_of(rot: np.ndarray) -> np.ndarray:
     """Angle (radians) between the body's up axis and world up."""
-    up = R.rotate(rot, np.broadcast_to(UP, rot.shape[:-1] + (3,)))
-    return np.arccos(np.clip(up[..., 1], -1.0, 1.0))
+    return np.arccos(np.clip(F.up_y(rot), -1.0, 1.0))
 
 
 def wrap_angle(a: np.ndarray) -> np.ndarray:
@@ -71,14 +71,55 @@ def wrap_angle(a: np.ndarray) -> np.ndarray:
 
 
 def to_heading(yaw: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """World vectors (N, ..., 3) into the heading frame of yaw (N,)."""
-    q = R.heading_quat(-yaw)
-    q = q.reshape(q.shape[:1] + (1,) * (v.ndim - 2) + (4,))
-    return R.rotate(np.broadcast_to(q, v.shape[:-1] + (4,)), v)
+    """World vectors (N, ..., 3) into the heading frame of yaw (N,) radians."""
+    return F.rotate_yaw(-yaw, v)
 
 
 def from_heading(yaw: np.ndarray, v: np.ndarray) -> np.ndarray:
-    return to_heading(-yaw, v)
+    """Heading-frame vectors (N, ..., 3) into the world frame."""
+    return F.rotate_yaw(yaw, v)
+
+
+@dataclass(frozen=True)
+class EnvParams:
+    """The config values the step reads, copied once into plain floats (no OmegaConf in the hot path)."""
+
+    kp: float
+    kd: float
+    acc_min: float
+    acc_max: float
+    substeps: int
+    solver: str
+    foot_mode: str
+    foot_offset: float
+    td_enabled: bool
+    late_margin: float
+    max_delay: int
+    early_margin: float
+    early_min_swing: float
+    zero_vertical_velocity: bool
+    w_stand: float
+    w_mimic: float
+    k_disp: float
+    k_rot: float
+    k_ee: float
+    k_vel: float
+    max_height: float
+    min_height_ratio: float
+    min_height_abs: float
+    max_tilt: float  # radians
+
+    @classmethod
+    def from_cfg(cls, cfg) -> "EnvParams":
+        t, a, td, r, term = cfg.tracking, cfg.action, cfg.touchdown, cfg.reward, cfg.termination
+        return cls(kp=float(t.kp), kd=float(t.kd), acc_min=float(t.acc_min), acc_max=float(t.acc_max), substeps=int(t.substeps),
+                   solver=str(t.solver), foot_mode=str(a.foot_mode), foot_offset=float(a.foot_offset), td_enabled=bool(td.enabled),
+                   late_margin=float(td.late_margin), max_delay=int(td.max_delay), early_margin=float(td.early_margin),
+                   early_min_swing=float(td.early_min_swing), zero_vertical_velocity=bool(td.zero_vertical_velocity),
+                   w_stand=float(r.w_stand), w_mimic=float(r.w_mimic), k_disp=float(r.k_disp), k_rot=float(r.k_rot),
+                   k_ee=float(r.k_ee), k_vel=float(r.k_vel), max_height=float(term.max_height),
+                   min_height_ratio=float(term.min_height_ratio), min_height_abs=float(term.min_height_abs),
+                   max_tilt=float(np.radians(term.max_tilt_deg)))
 
 
 class SRBEnv:
@@ -91,19 +132,20 @@ class SRBEnv:
         clip = None
         if reference is None or body is None:
             clip = load_clip(cfg.reference.clip)
-        self.cfg = cfg
-        self.ref = reference or build_reference(clip, cfg.reference.contact_height, cfg.reference.contact_speed, cfg.reference.min_phase_frames)
+        rc = cfg.reference
+        self.ref = reference or build_reference(clip, rc.contact_height, rc.contact_speed, rc.min_phase_frames)
         self.body = body or make_body(clip, cfg.body.mass, cfg.body.inertia_pose_frame)
+        self.p = EnvParams.from_cfg(cfg)
         self.num_envs = num_envs
         self.rng = np.random.default_rng(seed)
         self.auto_reset = auto_reset
         self.max_steps = int(max_steps if max_steps is not None else cfg.termination.max_steps)
         self.dt = self.ref.dt
         t = cfg.tracking
-        self.qp = QPParams(mass=self.body.mass, mu=cfg.body.friction, w_linear=t.w_linear, w_angular=t.w_angular,
-                           force_reg=t.force_reg, torque_limit=t.torque_limit, torque_reg=t.torque_reg)
+        self.qp = QPParams(mass=self.body.mass, mu=float(cfg.body.friction), w_linear=float(t.w_linear), w_angular=float(t.w_angular),
+                           force_reg=float(t.force_reg), torque_limit=float(t.torque_limit), torque_reg=float(t.torque_reg))
         a = cfg.action
-        self.action_scale = np.array([a.foot_scale] * 4 + [a.lin_vel_scale] * 3 + [a.ang_vel_scale] * 3)
+        self.action_scale = np.array([a.foot_scale] * 4 + [a.lin_vel_scale] * 3 + [a.ang_vel_scale] * 3, dtype=float)
         n = num_envs
         self.pos, self.vel = np.zeros((n, 3)), np.zeros((n, 3))
         self.rot, self.ang_vel = np.tile(R.IDENTITY, (n, 1)), np.zeros((n, 3))
@@ -114,6 +156,7 @@ class SRBEnv:
         self.foot_yaw = np.zeros((n, 2))
         self.stance = np.ones((n, 2), dtype=bool)
         self.last_forces = np.zeros((n, N_POINTS, 3))
+        self.last_tau = np.zeros((n, 3))
         self.episode_return = np.zeros(n)
         self.stats = {"qp_solves": 0, "qp_failures": 0, "late_touchdowns": 0, "early_touchdowns": 0}
         self.reset()
@@ -133,7 +176,7 @@ class SRBEnv:
         self.steps[idx] = 0
         self.delay[idx] = 0
         k, i = self.ref.split(frames)
-        self.foot_pos[idx] = R.rotate(self.ref.cycle_quat(k)[:, None, :].repeat(2, 1), self.ref.foot_mid[i]) + self.ref.cycle_shifts[k][:, None, :]
+        self.foot_pos[idx] = F.rotate_yaw(self.ref.cycle_yaws[k], self.ref.foot_mid[i]) + self.ref.cycle_shifts[k][:, None, :]
         self.foot_yaw[idx] = self.ref.foot_yaw[i] + self.ref.cycle_yaws[k][:, None]
         self.stance[idx] = self.ref.stance[i]
         self.episode_return[idx] = 0.0
@@ -144,7 +187,7 @@ class SRBEnv:
         yaw = heading_of(self.rot)
         obs = np.empty((self.num_envs, 20))
         obs[:, 0] = self.pos[:, 1]
-        obs[:, 1:5] = R.multiply(R.heading_quat(-yaw), self.rot)
+        obs[:, 1:5] = F.qmul(F.yaw_quat(-yaw), self.rot)
         obs[:, 5:8] = to_heading(yaw, self.vel)
         obs[:, 8:11] = to_heading(yaw, self.ang_vel)
         feet = to_heading(yaw, self.foot_pos - self.pos[:, None, :])
@@ -166,15 +209,14 @@ class SRBEnv:
     def place_swing_feet(self, foot_action: np.ndarray, target_frames: np.ndarray) -> None:
         """Paper §6: a swing foot = COM_t + R_y(heading_t) (local offset); stance feet stay put."""
         yaw = heading_of(self.rot)
-        _, i = self.ref.split(target_frames)
+        i = target_frames % self.ref.cycle
         act = np.zeros((self.num_envs, 2, 3))
         act[..., 0], act[..., 2] = foot_action[:, [0, 2]], foot_action[:, [1, 3]]
-        if self.cfg.action.foot_mode == "reference":
+        if self.p.foot_mode == "reference":
             local = self.ref.foot_local[i] + act
             fyaw = yaw[:, None] + wrap_angle(self.ref.foot_yaw[i] - self.ref.root_yaw[i][:, None])
-        else:  # paper: k = (-0.07, 0, 0) right / (0.07, 0, 0) left in its lateral axis; ours is z (right = +z)
-            k = np.array([[0.0, 0.0, self.cfg.action.foot_offset], [0.0, 0.0, -self.cfg.action.foot_offset]])
-            local = act + k
+        else:  # paper: k = (-0.07, 0, 0) right / (0.07, 0, 0) left on its lateral axis; ours is z (right = +z)
+            local = act + np.array([[0.0, 0.0, self.p.foot_offset], [0.0, 0.0, -self.p.foot_offset]])
             fyaw = np.repeat(yaw[:, None], 2, axis=1)
         world = self.pos[:, None, :] + from_heading(yaw, local)
         world[..., 1] = 0.0
@@ -187,42 +229,42 @@ class SRBEnv:
 
         v_d = reference velocity + the action's relative velocity (reference heading frame);
         the orientation error is log(q_d q^-1) (world rotation vector)."""
-        t = self.cfg.tracking
+        p = self.p
         v_d = target["vel"] + from_heading(target["yaw"], rel_vel)
         w_d = target["ang_vel"] + from_heading(target["yaw"], rel_ang)
-        rot_err = R.log_map(R.multiply(target["rot"], R.conjugate(self.rot)))
+        rot_err = F.log_map(F.qmul(target["rot"], F.qconj(self.rot)))
         acc = np.empty((self.num_envs, 6))
-        acc[:, :3] = t.kp * (target["pos"] - self.pos) + t.kd * (v_d - self.vel)
-        acc[:, 3:] = t.kp * rot_err + t.kd * (w_d - self.ang_vel)
-        return np.clip(acc, t.acc_min, t.acc_max)
+        acc[:, :3] = p.kp * (target["pos"] - self.pos) + p.kd * (v_d - self.vel)
+        acc[:, 3:] = p.kp * rot_err + p.kd * (w_d - self.ang_vel)
+        return np.clip(acc, p.acc_min, p.acc_max)
 
     def world_inertia(self) -> np.ndarray:
-        m = R.to_matrix(self.rot)
+        m = F.to_matrix(self.rot)
         return m @ self.body.inertia @ m.transpose(0, 2, 1)
 
     def advance_body(self, acc_des: np.ndarray, points: np.ndarray, active: np.ndarray, push: np.ndarray | None, h: float) -> dict:
         """One QP solve and one semi-implicit Euler step of length h (s). `push` (N, 3) N, world."""
         batch = QPBatch(points=points, active=active, com=self.pos, inertia=self.world_inertia(), ang_vel=self.ang_vel, acc_des=acc_des)
-        out = solve_batch(batch, self.qp, self.cfg.tracking.solver)
+        out = solve_batch(batch, self.qp, self.p.solver)
         lin = out["qdd"][:, :3] if push is None else out["qdd"][:, :3] + push / self.body.mass
         self.vel += h * lin
         self.pos += h * self.vel
         self.ang_vel += h * out["qdd"][:, 3:]
-        self.rot = R.normalize(R.multiply(R.exp_map(self.ang_vel * h), self.rot))
+        self.rot = F.normalize(F.qmul(F.exp_map(self.ang_vel * h), self.rot))
         self.stats["qp_solves"] += self.num_envs
         self.stats["qp_failures"] += int((out["flags"] < 0).sum())
         return out
 
     def advance_reference(self) -> None:
         """Move every environment to its next reference frame, with paper §6's touch-down rules."""
-        ref, td = self.ref, self.cfg.touchdown
+        ref, p = self.ref, self.p
         new = self.frame + 1
         sched = ref.stance[new % ref.cycle]
         touch = ~self.stance & sched
         lift = self.stance & ~sched
-        if td.enabled:
+        if p.td_enabled:
             y_ref = ref.state(new)["pos"][:, 1]
-            late = touch.any(axis=1) & (self.pos[:, 1] > y_ref + td.late_margin) & (self.delay < td.max_delay)
+            late = touch.any(axis=1) & (self.pos[:, 1] > y_ref + p.late_margin) & (self.delay < p.max_delay)
         else:
             late = np.zeros(self.num_envs, dtype=bool)
         go = ~late
@@ -231,17 +273,16 @@ class SRBEnv:
         self.delay[go] = 0
         self.delay[late] += 1
         self.stats["late_touchdowns"] += int(late.sum())
-        if td.enabled:
+        if p.td_enabled:
             self._early_touchdown(go)
 
     def _early_touchdown(self, moved: np.ndarray) -> None:
-        """A swing foot whose COM sank below the touch-down height lands now: jump the reference."""
-        ref, td = self.ref, self.cfg.touchdown
+        """A swing foot whose COM sank below the touch-down height in the late part of its swing
+        lands now: the reference jumps to that foot's touch-down frame (paper §6)."""
+        ref, p = self.ref, self.p
         i = self.frame % ref.cycle
-        sched = ref.stance[i]
-        low = self.pos[:, 1] < ref.touchdown_height - td.early_margin
-        late_swing = ref.swing_progress[i] >= td.early_min_swing
-        early = moved[:, None] & low[:, None] & ~self.stance & ~sched & late_swing  # (N, 2)
+        low = self.pos[:, 1] < ref.touchdown_height - p.early_margin
+        early = (moved & low)[:, None] & ~self.stance & ~ref.stance[i] & (ref.swing_progress[i] >= p.early_min_swing)
         if not early.any():
             return
         envs = np.flatnonzero(early.any(axis=1))
@@ -250,39 +291,37 @@ class SRBEnv:
         self.frame[envs] += ahead
         self.stance[envs] = ref.stance[self.frame[envs] % ref.cycle]
         self.stance[envs, foot] = True
-        if td.zero_vertical_velocity:
+        if p.zero_vertical_velocity:
             self.vel[envs, 1] = np.maximum(self.vel[envs, 1], 0.0)
         self.stats["early_touchdowns"] += int(envs.size)
 
     # ------------------------------------------------------------------ reward / termination
     def terminated(self) -> np.ndarray:
         """Paper §5.3: COM height outside [min(0.7 y_ref, 0.2), 2.0] or tilt above 70 degrees."""
-        t = self.cfg.termination
+        p = self.p
         y_ref = self.ref.state(self.frame)["pos"][:, 1]
-        lo = np.minimum(t.min_height_ratio * y_ref, t.min_height_abs)
+        lo = np.minimum(p.min_height_ratio * y_ref, p.min_height_abs)
         y = self.pos[:, 1]
-        return (y < lo) | (y > t.max_height) | (tilt_of(self.rot) > np.radians(t.max_tilt_deg))
+        return (y < lo) | (y > p.max_height) | (F.up_y(self.rot) < np.cos(p.max_tilt))
 
     def mimic_terms(self, before: dict, frame0: np.ndarray) -> dict[str, np.ndarray]:
-        """Squared errors of paper §5.2's pose, end-effector and velocity terms for the step just taken."""
-        ref = self.ref
+        """Weighted squared errors of paper §5.2's pose, end-effector and velocity terms for the step
+        just taken (SRB from t to t+1 vs the reference from frame0 to frame0 + 1)."""
+        ref, p = self.ref, self.p
         r0, r1 = ref.state(frame0), ref.state(frame0 + 1)
         yaw0, ryaw0 = heading_of(before["rot"]), r0["yaw"]
         d_srb = to_heading(yaw0, self.pos - before["pos"])
         d_ref = to_heading(ryaw0, r1["pos"] - r0["pos"])
-        q_srb = R.multiply(R.heading_quat(-yaw0), self.rot)
-        q_ref = R.multiply(R.heading_quat(-ryaw0), r1["rot"])
-        pose = self.cfg.reward.k_disp * np.sum((d_srb - d_ref) ** 2, -1) + self.cfg.reward.k_rot * R.angle_between(q_srb, q_ref) ** 2
+        d_err = np.sum((d_srb - d_ref) ** 2, -1)
+        q_srb = F.qmul(F.yaw_quat(-yaw0), self.rot)
+        q_ref = F.qmul(F.yaw_quat(-ryaw0), r1["rot"])
+        pose = p.k_disp * d_err + p.k_rot * F.quat_angle(q_srb, q_ref) ** 2
         pts = to_heading(yaw0, before["points"] - before["pos"][:, None, :]).reshape(-1, 2, 2, 3)
-        _, i0 = ref.split(frame0)
-        ref_pts = ref.sole_local[i0]
-        err = np.sum((pts - ref_pts) ** 2, -1).sum(-1)  # (N, 2)
-        ee = np.sum(np.where(before["stance"], err, 0.0), -1) + np.sum((d_srb - d_ref) ** 2, -1)
-        ee = self.cfg.reward.k_ee * ee
-        yaw1 = heading_of(self.rot)
-        v_srb = to_heading(yaw1, self.pos - before["pos"]) / self.dt
+        err = np.sum((pts - ref.sole_local[frame0 % ref.cycle]) ** 2, -1).sum(-1)  # (N, 2)
+        ee = p.k_ee * (np.sum(np.where(before["stance"], err, 0.0), -1) + d_err)
+        v_srb = to_heading(heading_of(self.rot), self.pos - before["pos"]) / self.dt
         v_ref = to_heading(r1["yaw"], r1["pos"] - r0["pos"]) / self.dt
-        vel = self.cfg.reward.k_vel * np.sum((v_srb - v_ref) ** 2, -1)
+        vel = p.k_vel * np.sum((v_srb - v_ref) ** 2, -1)
         return {"pose": pose, "ee": ee, "vel": vel}
 
     # ------------------------------------------------------------------ step
@@ -294,29 +333,27 @@ class SRBEnv:
         environments restart and info["final_obs"] holds their last observation.
         """
         a = np.asarray(action, dtype=float) * self.action_scale
-        before = {"pos": self.pos.copy(), "rot": self.rot.copy(), "points": None, "stance": self.stance.copy()}
+        before = {"pos": self.pos.copy(), "rot": self.rot.copy(), "stance": self.stance.copy()}
         frame0 = self.frame.copy()
         target = self.ref.state(frame0 + 1)
         self.place_swing_feet(a[:, :4], frame0 + 1)
         points = self.contact_points()
         before["points"] = points
         active = np.repeat(self.stance, 2, axis=1)
-        substeps = self.cfg.tracking.substeps
-        h = self.dt / substeps
-        for _ in range(substeps):
+        h = self.dt / self.p.substeps
+        for _ in range(self.p.substeps):
             acc_des = self.desired_acceleration(target, a[:, 4:7], a[:, 7:10])
             out = self.advance_body(acc_des, points, active, push, h)
-        self.last_forces = out["forces"]
+        self.last_forces, self.last_tau = out["forces"], out["tau"]
         self.advance_reference()
         self.steps += 1
         terminal = self.terminated()
         truncated = ~terminal & (self.steps >= self.max_steps)
         terms = self.mimic_terms(before, frame0)
-        rcfg = self.cfg.reward
         mimic = -(terms["pose"] + terms["ee"] + terms["vel"])
-        reward = np.maximum(0.0, rcfg.w_stand * (~terminal) + rcfg.w_mimic * mimic)
+        reward = np.maximum(0.0, self.p.w_stand * (~terminal) + self.p.w_mimic * mimic)
         self.episode_return += reward
-        info = {"terms": terms, "episode_return": None, "episode_length": None}
+        info: dict = {"terms": terms, "done_idx": np.zeros(0, dtype=int)}
         done = terminal | truncated
         obs = self.observe()
         if done.any():

@@ -241,9 +241,11 @@ class Reference:
     def cycle_quat(self, k: np.ndarray) -> np.ndarray:
         return R.heading_quat(self.cycle_yaws[k])
 
-    def state(self, frames: np.ndarray) -> dict[str, np.ndarray]:
-        """World root position, rotation, linear and angular velocity at unwrapped frames (N,)."""
-        k, i = self.split(frames)
+    @functools.cached_property
+    def table(self) -> dict[str, np.ndarray]:
+        """World root state at every unwrapped frame 0 .. MAX_CYCLES * C - 1 (precomputed once)."""
+        frames = np.arange(MAX_CYCLES * self.cycle)
+        k, i = frames // self.cycle, frames % self.cycle
         qc = self.cycle_quat(k)
         return {
             "pos": R.rotate(qc, self.root_pos[i]) + self.cycle_shifts[k],
@@ -252,6 +254,11 @@ class Reference:
             "ang_vel": R.rotate(qc, self.ang_vel[i]),
             "yaw": self.root_yaw[i] + self.cycle_yaws[k],
         }
+
+    def state(self, frames: np.ndarray) -> dict[str, np.ndarray]:
+        """World root position, rotation, linear and angular velocity and yaw at unwrapped frames (N,)."""
+        f = np.clip(np.asarray(frames, dtype=int), 0, MAX_CYCLES * self.cycle - 1)
+        return {key: value[f] for key, value in self.table.items()}
 
     def phase(self, frames: np.ndarray) -> np.ndarray:
         return (np.asarray(frames) % self.cycle) / self.cycle

@@ -1,0 +1,391 @@
+"""`charctl eval RUN... --dtw --confusion --switch A B --curves` for cgail (SPEC §1, section 6).
+
+Every mode writes JSON (+ CSV / PNG) into the output folder (default `<first run>/eval/`) and
+appends its table to `report.md` there, with the command that produced it and the paper's
+numbers alongside.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import shlex
+import sys
+import warnings
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+
+from charctl.errors import CharctlError
+from charctl.eval.dtw import dtw_align
+from charctl.eval.pose import pose_error_matrix
+from charctl.experiments import unsupported_options
+from charctl.experiments.cgail.policy import TrainedRun, load_trained_run, local_joint_rotations
+
+SUPPORTED = {"dtw", "confusion", "switch", "curves", "episodes", "out"}
+
+# Table 6.1 of the paper: per-motion mean per-frame pose error after DTW (AMP, cGAIL).
+PAPER_TABLE_6_1 = {
+    "walk": (2.462, 1.456), "run": (2.162, 0.808), "jump": (2.984, 1.781), "breakdance": (2.984, 2.233),
+    "spindance": (1.397, 1.051), "uppercut": (1.307, 0.659), "left_punch": (1.125, 1.412),
+    "right_punch": (0.881, 1.145), "right_kick": (1.942, 1.367), "left_kick": (2.301, 1.672),
+}
+
+
+@dataclass
+class SkillRollout:
+    """Per-episode recordings of one commanded skill."""
+
+    local_rot: list[np.ndarray]  # each (n_i, 15, 4) until the first fall
+    probs: np.ndarray | None  # (n_total, K) classifier probabilities over all recorded pairs
+    r_style: np.ndarray  # (n_total,)
+    falls: int
+
+
+# ---------------------------------------------------------------------------- rollouts
+@torch.no_grad()
+def rollout_skill(tr: TrainedRun, skill: int, episodes: int, seconds: float, seed: int = 0) -> SkillRollout:
+    """`episodes` envs commanded with `skill` (mean actions, RSI at frame 0, no switching)."""
+    env = tr.make_env(episodes, seed=seed, switch_prob=0.0, episode_seconds=seconds + 1.0)
+    env.forced_command = np.full(episodes, skill)
+    env.start_frame = 0
+    env.random_yaw = False
+    env.reset(np.arange(episodes))
+    steps = int(round(seconds * env.cfg.control_hz))
+    alive = np.ones(episodes, dtype=bool)
+    rots = [[local_joint_rotations(env)[i]] for i in range(episodes)]
+    pairs, falls = [], 0
+    for _ in range(steps):
+        o_t = env.obs.copy()
+        res = env.step(tr.mean_action(env))
+        rec = alive.copy()
+        pairs.append(np.concatenate([o_t, res.pair_next], axis=1)[rec])
+        fell = res.terminated & alive
+        falls += int(fell.sum())
+        alive &= ~res.terminated
+        cur = local_joint_rotations(env)
+        for i in np.flatnonzero(alive):
+            rots[i].append(cur[i])
+        if not alive.any():
+            break
+    allp = torch.as_tensor(np.concatenate(pairs), dtype=torch.float32)
+    d, logits = tr.agent.disc(allp)
+    from charctl.experiments.cgail.discriminator import style_reward
+
+    probs = F.softmax(logits, -1).numpy() if logits is not None else None
+    return SkillRollout([np.array(r) for r in rots], probs, style_reward(d).numpy(), falls)
+
+
+def skill_reference(tr: TrainedRun, skill: int, frames: int) -> np.ndarray:
+    """(m, 15, 4) reference local rotations covering `frames` frames (looping clips tiled)."""
+    ref = tr.agent.skills[skill]
+    rot = ref.local_rot
+    if ref.loop and frames > len(rot):
+        reps = int(np.ceil(frames / (len(rot) - 1)))
+        rot = np.concatenate([rot[:-1]] * reps + [rot[-1:]])[: frames]
+    return rot
+
+
+def dtw_pose_error(rollout_rot: np.ndarray, reference_rot: np.ndarray) -> float:
+    """Mean per-frame e_pose along the DTW alignment (12 clip joints; root excluded)."""
+    from charctl.motion.skeleton import load_skeleton
+
+    joints = load_skeleton().clip_joint_bodies
+    cost = pose_error_matrix(rollout_rot[:, joints], reference_rot[:, joints])
+    i, j, total = dtw_align(cost)
+    return float(cost[i, j].mean())
+
+
+# ---------------------------------------------------------------------------- modes
+def eval_dtw(runs: list[TrainedRun], episodes: int, out: Path) -> dict:
+    skills = runs[0].skill_names
+    table: dict[str, dict[str, float]] = {}
+    for s in skills:
+        table[s] = {}
+        for tr in runs:
+            if s not in tr.skill_names:
+                continue
+            k = tr.skill_index(s)
+            seconds = max(2.0, min(5.0, 2 * len(tr.agent.skills[k].local_rot) / tr.cfg.env.control_hz))
+            ro = rollout_skill(tr, k, episodes, seconds, seed=1234)
+            errs = [dtw_pose_error(r, skill_reference(tr, k, len(r))) for r in ro.local_rot if len(r) > 2]
+            table[s][tr.label] = float(np.mean(errs)) if errs else float("nan")
+            table[s][f"{tr.label} falls"] = ro.falls
+        if s in PAPER_TABLE_6_1:
+            table[s]["paper AMP"], table[s]["paper cGAIL"] = PAPER_TABLE_6_1[s]
+    result = {"table": table, "episodes": episodes, "runs": {tr.label: str(tr.run_dir) for tr in runs},
+              "metric": "mean per-frame e_pose (radians, l2 over the 12 joints) along the DTW path, RSI at frame 0"}
+    _write_json(out / "dtw.json", result)
+    cols = sorted({c for row in table.values() for c in row}, key=_column_order)
+    with open(out / "dtw.csv", "w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(["skill", *cols])
+        for s, row in table.items():
+            w.writerow([s, *[_fmt(row.get(c)) for c in cols]])
+    _print_table("Table 6.1: DTW pose error per skill (lower is better)", table, cols)
+    _append_report(out, "Table 6.1 — DTW pose error per skill", _markdown_table(table, cols), result["metric"])
+    return result
+
+
+def eval_confusion(tr: TrainedRun, episodes: int, out: Path) -> dict:
+    """Fig 6.8: mean classifier probabilities per commanded skill (policy) and per clip (data)."""
+    if not tr.agent.conditional:
+        raise CharctlError(f"{tr.run_dir} is an AMP (unconditional) run: it has no classifier for --confusion")
+    K = len(tr.skill_names)
+    policy = np.zeros((K, K))
+    for k in range(K):
+        ro = rollout_skill(tr, k, episodes, 3.0, seed=99)
+        policy[k] = ro.probs.mean(0)
+    data = np.zeros((K, K))
+    with torch.no_grad():
+        for k, p in enumerate(tr.agent.demos.pairs):
+            _, logits = tr.agent.disc(torch.from_numpy(p))
+            data[k] = F.softmax(logits, -1).mean(0).numpy()
+    result = {"skills": tr.skill_names, "policy": policy.tolist(), "data": data.tolist(),
+              "policy_diagonal": np.diag(policy).tolist(), "data_diagonal": np.diag(data).tolist(), "run": str(tr.run_dir)}
+    _write_json(out / "confusion.json", result)
+    from charctl.viz.plots import new_figure, save_figure
+
+    fig, axes = new_figure(1, 2, figsize=(4 + 1.1 * K, 2.2 + 0.5 * K))
+    for ax, mat, title in zip(axes, (policy, data), ("policy motion (commanded skill)", "clip data (clip label)")):
+        im = ax.imshow(mat, vmin=0, vmax=1, cmap="Blues")
+        ax.set_xticks(range(K), tr.skill_names, rotation=45, ha="right")
+        ax.set_yticks(range(K), tr.skill_names)
+        ax.set_xlabel("classifier output")
+        ax.set_title(title)
+        for i in range(K):
+            for j in range(K):
+                ax.text(j, i, f"{mat[i, j]:.2f}", ha="center", va="center", color="white" if mat[i, j] > 0.5 else "black", fontsize=8)
+    fig.colorbar(im, ax=axes, shrink=0.8)
+    save_figure(fig, out / "confusion.png")
+    rows = {s: {"policy P(correct)": policy[k, k], "data P(correct)": data[k, k]} for k, s in enumerate(tr.skill_names)}
+    _print_table("Fig 6.8: classifier confusion (diagonal)", rows, ["policy P(correct)", "data P(correct)"])
+    _append_report(out, "Fig 6.8 — classifier confusion diagonal", _markdown_table(rows, ["policy P(correct)", "data P(correct)"]) + "\n\n![confusion](confusion.png)",
+                   "rows: commanded skill (policy) or clip label (data); entries: mean softmax probability; rows sum to 1")
+    return result
+
+
+@torch.no_grad()
+def eval_switch(tr: TrainedRun, a: str, b: str, trials: int, out: Path, before_s: float = 2.0, after_s: float = 3.0) -> dict:
+    """Fig 6.10/6.11: command A -> B mid-episode with and without the ramp; latency and falls."""
+    if not tr.agent.conditional:
+        raise CharctlError(f"{tr.run_dir} is an AMP run: it takes no command, so --switch does not apply")
+    ka, kb = tr.skill_index(a), tr.skill_index(b)
+    hz = tr.cfg.env.control_hz
+    t_switch, t_end = int(before_s * hz), int((before_s + after_s) * hz)
+    curves, summary = {}, {}
+    ramp_frames = int(tr.cfg.env.ramp_frames) or 60
+    for name, ramp in (("ramp", ramp_frames), ("no_ramp", 0)):
+        env = tr.make_env(trials, seed=7, switch_prob=0.0, ramp_frames=ramp, episode_seconds=before_s + after_s + 1)
+        env.forced_command = np.full(trials, ka)
+        env.start_frame = 0
+        env.random_yaw = False
+        env.reset(np.arange(trials))
+        probs, rs, rc, alive_hist = [], [], [], []
+        alive = np.ones(trials, dtype=bool)
+        for t in range(t_end):
+            if t == t_switch:
+                env.set_command(np.arange(trials), kb, ramp=ramp > 0)
+                env.forced_command = np.full(trials, kb)
+                alive_at_switch = alive.copy()
+            o_t = env.obs.copy()
+            blend = env.command_blend()
+            cmd_a, cmd_b, w = env.prev_cmd.copy(), env.cmd.copy(), env.w.copy()
+            res = env.step(tr.mean_action(env))
+            pair = torch.as_tensor(np.concatenate([o_t, res.pair_next], axis=1), dtype=torch.float32)
+            d, logits = tr.agent.disc(pair)
+            p = F.softmax(logits, -1)
+            from charctl.experiments.cgail.discriminator import blended_class_reward, style_reward
+
+            r_c = blended_class_reward(p, torch.from_numpy(cmd_a), torch.from_numpy(cmd_b), torch.from_numpy(w).float(), len(tr.skill_names))
+            probs.append(p.numpy())
+            rs.append(style_reward(d).numpy())
+            rc.append(r_c.numpy())
+            alive_hist.append(alive.copy())
+            alive &= ~res.terminated
+        probs, rs, rc, live = np.array(probs), np.array(rs), np.array(rc), np.array(alive_hist)
+        pb = probs[t_switch:, :, kb]
+        latency = [int(np.argmax(pb[:, i] > 0.5)) if (pb[:, i] > 0.5).any() else None for i in range(trials) if alive_at_switch[i]]
+        lat_ok = [x for x in latency if x is not None]
+        falls = int((~alive).sum())
+        summary[name] = {"ramp_frames": ramp, "alive_at_switch": int(alive_at_switch.sum()), "latency_frames_mean": float(np.mean(lat_ok)) if lat_ok else None,
+                         "latency_frames": latency, "never_switched": int(sum(x is None for x in latency)), "falls": falls, "trials": trials}
+        with np.errstate(all="ignore"), warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            mean = lambda x: np.nanmean(np.where(live[..., None] if x.ndim == 3 else live, x, np.nan), axis=1)  # noqa: E731
+            curves[name] = {"probs": mean(probs), "r_style": mean(rs), "r_class": mean(rc)}
+    _plot_switch(curves, tr.skill_names, ka, kb, t_switch, hz, out / f"switch_{a}_to_{b}.png")
+    result = {"from": a, "to": b, "switch_frame": t_switch, "summary": summary, "run": str(tr.run_dir),
+              "curves": {n: {k: v.tolist() for k, v in c.items()} for n, c in curves.items()}}
+    _write_json(out / f"switch_{a}_to_{b}.json", result)
+    rows = {n: {"latency (frames, P(B)>0.5)": s["latency_frames_mean"], "never switched": s["never_switched"], "falls": s["falls"], "alive at switch": s["alive_at_switch"], "trials": s["trials"]} for n, s in summary.items()}
+    cols = ["latency (frames, P(B)>0.5)", "never switched", "falls", "alive at switch", "trials"]
+    _print_table(f"Fig 6.10/6.11: switch {a} -> {b}", rows, cols)
+    _append_report(out, f"Fig 6.10/6.11 — command switch {a} → {b}", _markdown_table(rows, cols) + f"\n\n![switch](switch_{a}_to_{b}.png)",
+                   f"switch at frame {t_switch} ({before_s:.1f} s); ramp = {ramp_frames} frames linear (eq 4.10); latency = frames after the switch until the classifier's P({b}) > 0.5")
+    return result
+
+
+def _plot_switch(curves, names, ka, kb, t_switch, hz, path) -> None:
+    from charctl.viz.plots import new_figure, save_figure
+
+    fig, axes = new_figure(3, 2, figsize=(11, 7), sharex=True)
+    for col, (name, c) in enumerate(curves.items()):
+        t = (np.arange(len(c["r_style"])) - t_switch) / hz
+        for k, n in enumerate(names):
+            axes[0, col].plot(t, c["probs"][:, k], label=n, lw=2 if k in (ka, kb) else 1)
+        axes[0, col].set_title(f"{name.replace('_', ' ')}: class probabilities C(o, o')")
+        axes[1, col].plot(t, c["r_style"], color="tab:green")
+        axes[1, col].set_title("style reward r_S")
+        axes[2, col].plot(t, c["r_class"], color="tab:red")
+        axes[2, col].set_title("control reward r_C")
+        axes[2, col].set_xlabel("time from switch (s)")
+        for r in range(3):
+            axes[r, col].axvline(0, color="k", ls=":")
+            axes[r, col].set_ylim(-0.05, 1.05)
+    axes[0, 0].legend(fontsize=7)
+    save_figure(fig, path)
+
+
+def eval_curves(run_dirs: list[Path], out: Path) -> dict:
+    """Training-curve figures from the TensorBoard logs (Fig 6.3, 6.4, 6.6/6.7, 6.9)."""
+    from charctl.eval.tb import read_scalars
+    from charctl.runs import read_run_config
+    from charctl.viz.plots import new_figure, save_figure
+
+    runs = []
+    for d in run_dirs:
+        cfg = read_run_config(d)
+        n_sk = len(cfg.use_skills) if cfg.use_skills else len(cfg.skills)
+        kind = "cGAIL" if cfg.cgail.conditional else "AMP"
+        if cfg.cgail.conditional and cfg.cgail.class_loss == "ls":
+            kind += "-LS"
+        runs.append((f"{kind} ({n_sk} skills) {Path(d).name}", cfg, read_scalars(Path(d) / "tb")))
+    figs = {
+        "curves_reward.png": ("Fig 6.3: mean reward", ["train/reward"]),
+        "curves_disc_accuracy.png": ("Fig 6.4: discriminator accuracy (data / policy)", ["train/disc_acc_data", "train/disc_acc_policy"]),
+        "curves_style_loss.png": ("Fig 6.5: style loss", ["losses/disc_style"]),
+        "curves_class_loss.png": ("Fig 6.6/6.7: class loss (CE vs LS)", ["losses/disc_class"]),
+        "curves_class_accuracy.png": ("Fig 6.9: classifier accuracy on data vs policy", ["train/class_acc_data", "train/class_acc_policy"]),
+        "curves_episode_length.png": ("episode length (control steps)", ["train/episode_length"]),
+    }
+    written = []
+    for fname, (title, tags) in figs.items():
+        fig, ax = new_figure(figsize=(7, 4))
+        any_line = False
+        for label, _, scalars in runs:
+            for tag in tags:
+                if tag in scalars:
+                    steps, vals = scalars[tag]
+                    ax.plot(steps, _smooth(vals), label=f"{label} {tag.split('/')[-1]}" if len(tags) > 1 else label)
+                    any_line = True
+        ax.set_title(title)
+        ax.set_xlabel("samples")
+        if any_line:
+            ax.legend(fontsize=7)
+        save_figure(fig, out / fname)
+        written.append(fname)
+    _append_report(out, "Training curves", "\n".join(f"![{f}]({f})" for f in written), "runs: " + ", ".join(r[0] for r in runs))
+    print(f"wrote {len(written)} figures to {out}")
+    return {"figures": written}
+
+
+def _smooth(v: np.ndarray, k: int = 5) -> np.ndarray:
+    if len(v) < k:
+        return v
+    return np.convolve(v, np.ones(k) / k, mode="same")
+
+
+# ---------------------------------------------------------------------------- entry point
+def evaluate(targets: list[str], options: dict, overrides: list[str]) -> None:
+    unsupported_options("cgail", options, SUPPORTED)
+    if overrides:
+        raise CharctlError(f"cgail eval takes no config overrides (got {' '.join(overrides)})")
+    if any(t == "cgail" for t in targets):
+        from charctl.runs import latest_run
+
+        targets = [str(latest_run("outputs", "cgail")) if t == "cgail" else t for t in targets]
+    run_dirs = [Path(t) for t in targets]
+    out = Path(options.get("out") or run_dirs[0] / "eval")
+    out.mkdir(parents=True, exist_ok=True)
+    _append_report(out, None, None, None, command="charctl eval " + " ".join(shlex.quote(a) for a in sys.argv[2:]) if sys.argv and sys.argv[0].endswith("charctl") else None)
+    episodes = int(options.get("episodes") or 4)
+    if options.get("curves"):
+        eval_curves(run_dirs, out)
+    needs_policy = options.get("dtw") or options.get("confusion") or options.get("switch")
+    if not needs_policy:
+        return
+    runs = [load_trained_run(d) for d in run_dirs]
+    if options.get("dtw"):
+        eval_dtw(runs, episodes, out)
+    if options.get("confusion"):
+        for tr in runs:
+            if tr.agent.conditional:
+                eval_confusion(tr, episodes, out)
+                break
+        else:
+            raise CharctlError("--confusion needs a conditional (cGAIL) run")
+    if options.get("switch"):
+        a, b = options["switch"]
+        tr = next((t for t in runs if t.agent.conditional), None)
+        if tr is None:
+            raise CharctlError("--switch needs a conditional (cGAIL) run")
+        eval_switch(tr, a, b, max(episodes, 2), out)
+    print(f"results in {out}/ (report.md)")
+
+
+# ---------------------------------------------------------------------------- output helpers
+def _column_order(c: str) -> tuple:
+    order = ["cGAIL", "cGAIL-LS", "AMP", "paper cGAIL", "paper AMP"]
+    base = c.replace(" falls", "")
+    return (order.index(base) if base in order else 9, c.endswith("falls"), c)
+
+
+def _fmt(v) -> str:
+    if v is None:
+        return "-"
+    if isinstance(v, float):
+        return "nan" if np.isnan(v) else f"{v:.3f}"
+    return str(v)
+
+
+def _markdown_table(rows: dict, cols: list[str]) -> str:
+    lines = ["| | " + " | ".join(cols) + " |", "|---|" + "---|" * len(cols)]
+    for name, row in rows.items():
+        lines.append(f"| {name} | " + " | ".join(_fmt(row.get(c)) for c in cols) + " |")
+    return "\n".join(lines)
+
+
+def _print_table(title: str, rows: dict, cols: list[str]) -> None:
+    from rich.console import Console
+    from rich.table import Table
+
+    t = Table(title=title)
+    t.add_column("")
+    for c in cols:
+        t.add_column(c, justify="right")
+    for name, row in rows.items():
+        t.add_row(name, *[_fmt(row.get(c)) for c in cols])
+    Console().print(t)
+
+
+def _write_json(path: Path, obj) -> None:
+    from charctl.runs import _jsonable, atomic_write_text
+
+    atomic_write_text(path, json.dumps(_jsonable(obj), indent=2))
+
+
+def _append_report(out: Path, title: str | None, body: str | None, note: str | None, command: str | None = None) -> None:
+    path = out / "report.md"
+    if not path.exists():
+        path.write_text("# cgail evaluation report\n\nPaper values: SPEC §1 / Table 6.1. Produced by charctl.\n")
+    with open(path, "a") as fh:
+        if command:
+            fh.write(f"\n`{command}`\n")
+        if title:
+            fh.write(f"\n## {title}\n\n{body}\n")
+            if note:
+                fh.write(f"\n_{note}_\n")

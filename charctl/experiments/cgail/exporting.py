@@ -1,0 +1,182 @@
+"""`charctl export RUN --onnx F | --torchscript F | --bvh F | --video F [--commands S]` and `charctl play`.
+
+The exported policy takes the raw state (243) and, for cGAIL, the command blend c̄ (K) and
+returns the mean action (28 PD-target offsets, radians); the observation normaliser is inside.
+A command schedule "walk:0,run:3,right_kick:6" (skill:start second) drives a rollout that is
+written as BVH (kinematic record of the simulated character) and/or mp4.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import torch
+from torch import nn
+
+from charctl.errors import CharctlError
+from charctl.experiments import unsupported_options
+from charctl.experiments.cgail.policy import TrainedRun, load_trained_run
+
+SUPPORTED = {"onnx", "torchscript", "bvh", "video", "commands", "seconds"}
+
+
+class ExportedPolicy(nn.Module):
+    """state (B, 243) [, command blend (B, K)] -> mean action (B, 28); normaliser built in."""
+
+    def __init__(self, tr: TrainedRun):
+        super().__init__()
+        m = tr.agent.model
+        self.norm_mean = nn.Parameter(m.obs_norm.mean.clone(), requires_grad=False)
+        self.norm_std = nn.Parameter(torch.sqrt(m.obs_norm.var + m.obs_norm.eps).clone(), requires_grad=False)
+        self.clip = float(m.obs_norm.clip)
+        self.actor = m.actor
+        self.conditional = tr.agent.conditional
+
+    def forward(self, state: torch.Tensor, command: torch.Tensor) -> torch.Tensor:
+        x = torch.clamp((state - self.norm_mean) / self.norm_std, -self.clip, self.clip)
+        if self.conditional:
+            x = torch.cat([x, command], dim=-1)
+        return self.actor(x)
+
+
+def _example_inputs(tr: TrainedRun, batch: int = 2) -> tuple[torch.Tensor, torch.Tensor]:
+    g = torch.Generator().manual_seed(0)
+    state = tr.agent.model.obs_norm.mean + torch.randn(batch, tr.agent.model.obs_dim, generator=g)
+    cmd = torch.zeros(batch, len(tr.skill_names))
+    cmd[:, 0] = 1.0
+    return state, cmd
+
+
+def export_onnx(tr: TrainedRun, path: Path) -> Path:
+    model = ExportedPolicy(tr).eval()
+    state, cmd = _example_inputs(tr)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    torch.onnx.export(model, (state, cmd), str(path), input_names=["state", "command"], output_names=["action"],
+                      dynamic_axes={"state": {0: "batch"}, "command": {0: "batch"}, "action": {0: "batch"}}, dynamo=False)
+    return path
+
+
+def export_torchscript(tr: TrainedRun, path: Path) -> Path:
+    model = ExportedPolicy(tr).eval()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    torch.jit.script(model).save(str(path))
+    return path
+
+
+def parse_schedule(text: str, names: list[str]) -> list[tuple[float, int]]:
+    """"walk:0,run:3" -> [(0.0, k_walk), (3.0, k_run)], sorted by time; one-line errors."""
+    out = []
+    for item in text.split(","):
+        if ":" not in item:
+            raise CharctlError(f"bad --commands item {item!r}: use skill:seconds, e.g. walk:0,run:3")
+        name, t = item.rsplit(":", 1)
+        name = name.strip()
+        if name not in names:
+            raise CharctlError(f"--commands names unknown skill {name!r}; the run's skills are {', '.join(names)}")
+        try:
+            sec = float(t)
+        except ValueError:
+            raise CharctlError(f"bad time {t!r} in --commands item {item!r}") from None
+        out.append((sec, names.index(name)))
+    return sorted(out)
+
+
+@torch.no_grad()
+def schedule_rollout(tr: TrainedRun, schedule: list[tuple[float, int]], seconds: float) -> tuple[np.ndarray, dict]:
+    """One character following the command schedule; returns qpos (T, nq) and stats."""
+    env = tr.make_env(1, seed=0, switch_prob=0.0, episode_seconds=seconds + 10)
+    env.forced_command = np.array([schedule[0][1]])
+    env.start_frame = 0
+    env.random_yaw = False
+    env.reset(np.array([0]))
+    hz = env.cfg.control_hz
+    qpos = [env.sim.qpos[0].copy()]
+    falls = 0
+    pending = list(schedule[1:])
+    for t in range(int(seconds * hz)):
+        while pending and t / hz >= pending[0][0]:
+            _, k = pending.pop(0)
+            env.set_command(np.array([0]), k, ramp=True)
+            env.forced_command = np.array([k])
+        res = env.step(tr.mean_action(env))
+        falls += int(res.terminated[0])
+        qpos.append(env.sim.qpos[0].copy())
+    return np.array(qpos), {"falls": falls, "fps": hz}
+
+
+def export(target: str, options: dict, overrides: list[str]) -> None:
+    unsupported_options("cgail", options, SUPPORTED)
+    if overrides:
+        raise CharctlError(f"cgail export takes no config overrides (got {' '.join(overrides)})")
+    if target == "cgail":
+        from charctl.runs import latest_run
+
+        target = str(latest_run("outputs", "cgail"))
+    tr = load_trained_run(target)
+    did = False
+    if options.get("onnx"):
+        print(f"wrote {export_onnx(tr, Path(options['onnx']))}")
+        did = True
+    if options.get("torchscript"):
+        print(f"wrote {export_torchscript(tr, Path(options['torchscript']))}")
+        did = True
+    if options.get("bvh") or options.get("video"):
+        names = tr.skill_names
+        text = options.get("commands") or f"{names[0]}:0"
+        schedule = parse_schedule(text, names)
+        seconds = float(options.get("seconds") or (schedule[-1][0] + 3.0))
+        qpos, stats = schedule_rollout(tr, schedule, seconds)
+        if options.get("bvh"):
+            from charctl.motion.bvh import write_bvh
+            from charctl.motion.clip import Clip
+            from charctl.sim.humanoid import qpos_to_local_rot
+
+            root, rot = qpos_to_local_rot(qpos)
+            clip = Clip(name="cgail_rollout", fps=stats["fps"], root_pos=root, local_rot=rot)
+            print(f"wrote {write_bvh(clip, options['bvh'])} ({len(qpos)} frames, falls: {stats['falls']})")
+        if options.get("video"):
+            from charctl.sim.humanoid import load_model
+            from charctl.viz.video import render_qpos
+
+            info = render_qpos(load_model(tr.cfg.env.physics_hz), qpos, options["video"], stats["fps"])
+            print(f"wrote {options['video']} ({info['frames']} frames, falls: {stats['falls']})")
+        did = True
+    if not did:
+        raise CharctlError("say what to export: --onnx FILE, --torchscript FILE, --bvh FILE or --video FILE")
+
+
+def play(run_dir) -> None:
+    """Interactive viewer: keys 1..9 switch the command (needs a display)."""
+    import os
+
+    if not os.environ.get("DISPLAY") and os.environ.get("MUJOCO_GL", "glfw") != "glfw":
+        raise CharctlError("no display for the interactive viewer; record a rollout instead: charctl export RUN --video out.mp4 --commands \"walk:0,run:3\"")
+    import time
+
+    import mujoco.viewer
+
+    tr = load_trained_run(run_dir)
+    env = tr.make_env(1, seed=0, switch_prob=0.0, episode_seconds=1e6)
+    env.forced_command = np.array([0])
+    env.reset(np.array([0]))
+    model = env.sim.model
+    data = env.sim.batch.get_data(0)
+    names = tr.skill_names
+    print("keys: " + ", ".join(f"{i + 1}={n}" for i, n in enumerate(names[:9])))
+
+    def on_key(key: int) -> None:
+        k = key - ord("1")
+        if 0 <= k < len(names):
+            env.set_command(np.array([0]), k, ramp=True)
+            env.forced_command = np.array([k])
+            print(f"command: {names[k]}")
+
+    with mujoco.viewer.launch_passive(model, data, key_callback=on_key) as viewer:
+        while viewer.is_running():
+            t0 = time.perf_counter()
+            env.step(tr.mean_action(env))
+            env.sim.batch.get_data(0, data)
+            mujoco.mj_forward(model, data)
+            viewer.sync()
+            time.sleep(max(0.0, 1.0 / env.cfg.control_hz - (time.perf_counter() - t0)))

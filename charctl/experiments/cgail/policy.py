@@ -1,0 +1,78 @@
+"""Load a trained cgail run and roll its policy out (evaluation, export, play, push tests)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from charctl.errors import CharctlError
+from charctl.experiments.cgail.env import CgailEnv
+from charctl.experiments.cgail.trainer import Agent, build_agent, load_agent_state
+from charctl.motion import rotations as R
+
+
+@dataclass
+class TrainedRun:
+    run_dir: Path
+    cfg: object
+    agent: Agent
+
+    @property
+    def skill_names(self) -> list[str]:
+        return [s.name for s in self.agent.skills]
+
+    @property
+    def label(self) -> str:
+        kind = "cGAIL" if self.agent.conditional else "AMP"
+        if self.agent.conditional and self.cfg.cgail.class_loss == "ls":
+            kind += "-LS"
+        return kind
+
+    def skill_index(self, name: str) -> int:
+        if name not in self.skill_names:
+            raise CharctlError(f"unknown skill {name!r} for {self.run_dir}; its skills are {', '.join(self.skill_names)}")
+        return self.skill_names.index(name)
+
+    def make_env(self, num_envs: int, seed: int = 0, **env_overrides) -> CgailEnv:
+        from omegaconf import OmegaConf
+
+        env_cfg = OmegaConf.merge(self.cfg.env, {"num_envs": num_envs, **env_overrides})
+        return CgailEnv(self.agent.skills, env_cfg, seed=seed, conditional=self.agent.conditional)
+
+    @torch.no_grad()
+    def mean_action(self, env: CgailEnv) -> np.ndarray:
+        obs = torch.as_tensor(env.state, dtype=torch.float32)
+        cond = torch.as_tensor(env.command_blend(), dtype=torch.float32) if self.agent.conditional else None
+        return self.agent.model.mean_action(obs, cond).numpy().astype(np.float64)
+
+
+def load_trained_run(run_dir: str | Path) -> TrainedRun:
+    """Rebuild the agent of a cgail run directory and load its last checkpoint (weights_only)."""
+    from charctl.experiments.cgail.config import Config
+    from charctl.runs import open_run, run_experiment
+
+    run_dir = Path(run_dir)
+    exp = run_experiment(run_dir)
+    if exp != "cgail":
+        raise CharctlError(f"{run_dir} is a {exp!r} run, not a cgail run")
+    run = open_run(run_dir, Config)
+    torch.set_num_threads(max(1, int(run.cfg.train.torch_threads)))
+    agent = build_agent(run.cfg)
+    load_agent_state(agent, run.load_checkpoint(agent.signature()))
+    agent.model.eval()
+    agent.disc.eval()
+    return TrainedRun(run_dir, run.cfg, agent)
+
+
+def local_joint_rotations(env: CgailEnv) -> np.ndarray:
+    """(N, 15, 4) local rotations of the simulated characters (body 0: root world rotation)."""
+    from charctl.motion.skeleton import load_skeleton
+
+    skel = load_skeleton()
+    world = env.sim.body_quat_xyzw
+    local = world.copy()
+    local[:, 1:] = R.multiply(R.conjugate(world[:, skel.parents[1:]]), world[:, 1:])
+    return local

@@ -1,0 +1,299 @@
+"""`charctl eval RUN... --pose-error [--dtw]` for com-cnn (paper §4, Table 5).
+
+--pose-error, on the held-out clips of the first run's split:
+  (a) teacher forcing: history from the ground truth, C_t from the ground truth; mean joint-angle
+      error (degrees, averaged over the movable joints and all frames) per paper motion type, for
+      every run given (e.g. the COM model and the history-only model) and the nearest-neighbour
+      baseline, with the paper's Table 5 numbers alongside;
+  (b) autoregressive: seeded with ground-truth history, then fed its own output, C_t from the
+      ground truth; error against time horizon (PNG). With data.frame=root_t the root frame at t is
+      the ground truth's (the paper's input needs it); with root_prev nothing but C_t is given.
+  plus generation speed (batch 1, CPU, frames/s) of every run.
+--dtw: each held-out clip generated autoregressively from its first frame and its COM path, then
+  DTW-aligned to the ground truth; mean per-frame e_pose (SPEC §1, radians, l2 over joints).
+Writes report.md, pose_error.json and figures to -o DIR (default: <first run>/eval/).
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from charctl.errors import CharctlError
+from charctl.experiments.com_cnn.data import (
+    BodyModel, Sequence, WindowSet, heading_frame, load_sequences, motion_type, split_sequences,
+)
+from charctl.experiments.com_cnn.rollout import (
+    Buffer, CnnPredictor, Predictor, fit_nearest_neighbour, given_reference, previous_root_reference, rollout,
+)
+from charctl.motion import rotations as R
+
+# data keys that must agree for runs to share one evaluation table
+SPLIT_KEYS = ("bvh_dir", "clips", "mirror", "test_clips", "fps", "loop_min_seconds", "loop_blend_frames", "bvh_scale")
+
+
+@dataclass
+class LoadedRun:
+    dir: Path
+    cfg: object
+    model: object
+    body: BodyModel
+    seqs: list[Sequence]
+    metrics: dict
+
+    @property
+    def label(self) -> str:
+        m, d = self.cfg.model, self.cfg.data
+        kind = "CNN, history + COM" if m.use_com else "CNN, history only"
+        return f"{kind} (i={d.history}, w={m.kernel}, ch={'/'.join(str(c) for c in m.channels)}, {d.frame})"
+
+    def predictor(self) -> CnnPredictor:
+        return CnnPredictor(self.label, self.model, int(self.cfg.data.history), str(self.cfg.data.frame))
+
+
+def load_run(run_dir: str | Path, overrides: list[str] | None = None, device: str = "cpu") -> LoadedRun:
+    """Config, data and trained network of a com-cnn run directory."""
+    import torch
+
+    from charctl.experiments.com_cnn.config import Config
+    from charctl.experiments.com_cnn.model import build_model, model_signature
+    from charctl.runs import open_run
+
+    run = open_run(run_dir, Config, overrides)
+    if run.experiment != "com-cnn":
+        raise CharctlError(f"{run_dir} is a {run.experiment!r} run, not com-cnn")
+    if not run.has_checkpoint():
+        raise CharctlError(f"{run_dir} has no checkpoint (checkpoints/last.pt): train it first")
+    torch.set_num_threads(int(run.cfg.train.torch_threads))
+    seqs, body = load_sequences(run.cfg)
+    state = run.load_checkpoint(model_signature(run.cfg, body.pose_dim))
+    model = build_model(run.cfg, body.pose_dim)
+    model.load_state_dict(state["model"])
+    model.eval().to(device)
+    metrics_path = Path(run_dir) / "metrics.json"
+    metrics = json.loads(metrics_path.read_text()) if metrics_path.is_file() else {}
+    return LoadedRun(Path(run_dir), run.cfg, model, body, seqs, metrics)
+
+
+def resolve_targets(targets: list[str]) -> list[Path]:
+    from charctl.runs import latest_run
+
+    out = []
+    for t in targets:
+        out.append(latest_run("outputs", "com-cnn") if t == "com-cnn" else Path(t))
+    return out
+
+
+# ---------------------------------------------------------------------------- metrics
+def joint_angles_deg(joint_exp_a: np.ndarray, joint_rot_b: np.ndarray, body: BodyModel) -> np.ndarray:
+    """(...,) mean angle (degrees) over the movable joints between exp maps (..., 3J) and quats (..., J, 4)."""
+    qa = R.exp_map(joint_exp_a.reshape(joint_exp_a.shape[:-1] + (body.num_joints, 3)))
+    return np.degrees(R.angle_between(qa, joint_rot_b)[..., body.error_joints].mean(axis=-1))
+
+
+def teacher_forced_errors(pred: Predictor, seqs: list[Sequence], body: BodyModel, motion_types: dict, chunk: int = 512) -> dict:
+    """Mean joint-angle error (deg) per motion type, per clip and overall, history from the ground truth."""
+    from charctl.experiments.com_cnn.train import joint_angle_error_deg
+
+    w = WindowSet(seqs, body, pred.history, pred.frame)
+    errs = []
+    for s in range(0, len(w), chunk):
+        idx = np.arange(s, min(s + chunk, len(w)))
+        hist, com, target = w.features(idx)
+        errs.append(joint_angle_error_deg(pred.predict(hist, com), target, body))
+    err = np.concatenate(errs)
+    seq_of = w.table.seq_index[w.targets]
+    return summarise(err, [seqs[k] for k in seq_of], motion_types)
+
+
+def summarise(err: np.ndarray, seq_per_sample: list[Sequence], motion_types: dict) -> dict:
+    types = np.array([motion_type(s.label, motion_types) for s in seq_per_sample])
+    names = np.array([s.name for s in seq_per_sample])
+    out = {"all": float(err.mean()), "frames": int(err.size), "per_type": {}, "per_clip": {}}
+    for t in sorted(set(types)):
+        out["per_type"][t] = float(err[types == t].mean())
+    for n in sorted(set(names)):
+        out["per_clip"][n] = float(err[names == n].mean())
+    return out
+
+
+def reference_for(pred: Predictor, body: BodyModel, gt_pos: np.ndarray, gt_rot: np.ndarray):
+    """The rollout's reference frames: the model's own last frame (root_prev) or the ground truth's root at t."""
+    if pred.frame == "root_prev":
+        return previous_root_reference(body)
+    return given_reference(*heading_frame(gt_pos, gt_rot, body.forward))
+
+
+def seed_buffer(seq: Sequence, starts: np.ndarray, history: int) -> Buffer:
+    """Ground-truth history windows (B, i) ending just before each start (edge-padded at frame 0)."""
+    idx = np.maximum(starts[:, None] - history + np.arange(history)[None, :], 0)
+    return Buffer(seq.root_pos[idx], seq.root_rot[idx], R.log_map(seq.joint_rot[idx]).reshape(len(starts), history, -1))
+
+
+def autoregressive_errors(pred: Predictor, seqs: list[Sequence], body: BodyModel, horizon: int, stride: int, motion_types: dict) -> dict:
+    """Joint-angle error (deg) and root position error (m) against the number of generated frames."""
+    sums = {"all": np.zeros(horizon)}
+    counts = {"all": np.zeros(horizon)}
+    root_sum, root_cnt = np.zeros(horizon), np.zeros(horizon)
+    for seq in seqs:
+        T = seq.num_frames
+        H = min(horizon, T - 1)
+        starts = np.arange(1, T - H + 1, stride)
+        tgt = starts[:, None] + np.arange(H)[None, :]  # (B, H) ground-truth frames
+        gen = rollout(pred, body, seed_buffer(seq, starts, pred.history), seq.com[tgt],
+                      reference_for(pred, body, seq.root_pos[tgt], seq.root_rot[tgt]))
+        err = joint_angles_deg(gen.joint_exp, seq.joint_rot[tgt], body)  # (B, H)
+        kind = motion_type(seq.label, motion_types)
+        for key in ("all", kind):
+            sums.setdefault(key, np.zeros(horizon))[:H] += err.sum(0)
+            counts.setdefault(key, np.zeros(horizon))[:H] += err.shape[0]
+        root_sum[:H] += np.linalg.norm((gen.root_pos - seq.root_pos[tgt])[..., [0, 2]], axis=-1).sum(0)
+        root_cnt[:H] += err.shape[0]
+    curve = {k: (sums[k] / np.maximum(counts[k], 1)).tolist() for k in sums}
+    return {"curve_deg": curve, "root_xz_error_m": (root_sum / np.maximum(root_cnt, 1)).tolist(), "rollouts": int(counts["all"][0])}
+
+
+def dtw_errors(pred: Predictor, seqs: list[Sequence], body: BodyModel, motion_types: dict) -> dict:
+    """Each clip generated from its first frame (batched, padded to the longest), DTW e_pose against the truth."""
+    from charctl.eval.dtw import mean_aligned_cost
+    from charctl.eval.pose import pose_error, pose_error_matrix
+
+    Tmax = max(s.num_frames for s in seqs)
+    H = Tmax - 1
+    tgt = np.stack([np.minimum(np.arange(1, Tmax), s.num_frames - 1) for s in seqs])  # (B, H), padded by the last frame
+
+    def stack(attr: str) -> np.ndarray:
+        return np.stack([getattr(s, attr)[t] for s, t in zip(seqs, tgt)])
+
+    seed = Buffer(np.stack([s.root_pos[:1] for s in seqs]), np.stack([s.root_rot[:1] for s in seqs]),
+                  np.stack([R.log_map(s.joint_rot[:1]).reshape(1, -1) for s in seqs]))
+    gen = rollout(pred, body, seed, stack("com"), reference_for(pred, body, stack("root_pos"), stack("root_rot")))
+    J = body.num_joints
+    ej = body.error_joints
+    aligned, framewise = [], []
+    for b, s in enumerate(seqs):
+        n = s.num_frames - 1
+        qa = R.exp_map(gen.joint_exp[b, :n].reshape(n, J, 3))[:, ej]
+        qb = s.joint_rot[1:][:, ej]
+        aligned.append(mean_aligned_cost(pose_error_matrix(qa, qb)))
+        framewise.append(float(pose_error(qa, qb).mean()))
+    types = [motion_type(s.label, motion_types) for s in seqs]
+    out = {"per_clip": {s.name: a for s, a in zip(seqs, aligned)}, "per_type": {}, "framewise_per_type": {}}
+    for t in sorted(set(types)):
+        out["per_type"][t] = float(np.mean([a for a, k in zip(aligned, types) if k == t]))
+        out["framewise_per_type"][t] = float(np.mean([a for a, k in zip(framewise, types) if k == t]))
+    out["all"] = float(np.mean(aligned))
+    out["framewise_all"] = float(np.mean(framewise))
+    return out
+
+
+# ---------------------------------------------------------------------------- command
+def evaluate_command(targets: list[str], options: dict, overrides: list[str]) -> dict:
+    from charctl.experiments.com_cnn.generate import generation_speed
+
+    if not options.get("pose_error") and not options.get("dtw"):
+        raise CharctlError("com-cnn evaluates with --pose-error and/or --dtw")
+    runs = [load_run(d, overrides) for d in resolve_targets(targets)]
+    base = runs[0]
+    for r in runs[1:]:
+        diff = [k for k in SPLIT_KEYS if r.cfg.data[k] != base.cfg.data[k]]
+        if diff:
+            raise CharctlError(f"{r.dir} uses different data.{diff[0]} than {base.dir}: evaluate runs of one split together")
+    cfg = base.cfg
+    train_seqs, test_seqs = split_sequences(base.seqs, cfg.data.test_clips)
+    if not test_seqs:
+        raise CharctlError("no held-out clips (data.test_clips is empty): nothing to evaluate")
+    body, types = base.body, dict(cfg.eval.motion_types)
+    print(f"held-out clips: {', '.join(s.name for s in test_seqs)}")
+    nn = fit_nearest_neighbour(WindowSet(train_seqs, body, int(cfg.data.history), str(cfg.data.frame)),
+                               int(cfg.eval.nn_pca_dims), float(cfg.eval.nn_com_weight), int(cfg.seed))
+    preds: list[Predictor] = [r.predictor() for r in runs] + [nn]
+    out_dir = Path(options.get("out") or base.dir / "eval")
+    out_dir.mkdir(parents=True, exist_ok=True)
+    result: dict = {"runs": [str(r.dir) for r in runs], "test_clips": [s.name for s in test_seqs],
+                    "train_clips": sorted({s.base for s in train_seqs}), "motion_types": {k: list(v) for k, v in types.items()},
+                    "paper_table5": dict(cfg.eval.paper_table5), "fps": float(cfg.data.fps)}
+    if options.get("pose_error"):
+        horizon = max(1, int(round(float(cfg.eval.horizon_s) * cfg.data.fps)))
+        result["teacher_forced"] = {p.name: teacher_forced_errors(p, test_seqs, body, types) for p in preds}
+        result["autoregressive"] = {p.name: autoregressive_errors(p, test_seqs, body, horizon, int(cfg.eval.ar_stride), types) for p in preds}
+        result["generation_speed"] = {r.label: generation_speed(r) for r in runs}
+        result["training"] = {r.label: {k: r.metrics.get(k) for k in ("step", "samples_seen", "train_wall_s", "samples_per_s", "train_loss_ema", "test_loss", "train_windows", "test_windows", "parameters", "device")} for r in runs}
+        plot_ar_curves(result["autoregressive"], float(cfg.data.fps), out_dir / "ar_curve.png")
+    if options.get("dtw"):
+        result["dtw"] = {p.name: dtw_errors(p, test_seqs, body, types) for p in preds}
+    (out_dir / "pose_error.json").write_text(json.dumps(result, indent=2))
+    report = render_report(result)
+    (out_dir / "report.md").write_text(report)
+    print(report)
+    print(f"wrote {out_dir / 'report.md'}")
+    return result
+
+
+# ---------------------------------------------------------------------------- report
+def plot_ar_curves(ar: dict, fps: float, path: Path) -> None:
+    from charctl.viz.plots import new_figure, save_figure
+
+    fig, ax = new_figure(figsize=(7, 4))
+    for name, res in ar.items():
+        y = np.asarray(res["curve_deg"]["all"])
+        ax.plot(np.arange(1, len(y) + 1) / fps, y, label=name)
+    ax.set_xlabel("horizon (s) — frames generated from the model's own output")
+    ax.set_ylabel("mean joint-angle error (deg)")
+    ax.set_title("com-cnn autoregressive error on held-out clips")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=7)
+    save_figure(fig, path)
+
+
+def _row(cells) -> str:
+    return "| " + " | ".join(str(c) for c in cells) + " |"
+
+
+def render_report(res: dict) -> str:
+    """Markdown with the Table 5 style comparison, the autoregressive curve, DTW and speed."""
+    types = list(dict.fromkeys([*res["motion_types"], "other"]))
+    lines = ["# com-cnn evaluation", "",
+             f"Held-out clips: {', '.join(res['test_clips'])}.  ",
+             f"Training clips: {', '.join(res['train_clips'])} (and mirrors).  ",
+             "Motion types: " + "; ".join(f"{k} = {', '.join(v)}" for k, v in res["motion_types"].items()) + "; other = every other label.", ""]
+    if "teacher_forced" in res:
+        lines += ["## Teacher forcing (Table 5 style): mean joint-angle error, degrees", "",
+                  "History and C_t from the ground truth; error = angle between predicted and true local joint rotation, "
+                  "averaged over the movable joints and every frame of the held-out clips.", "",
+                  _row(["model", *types, "all", "frames"]), _row(["---"] * (len(types) + 3))]
+        for name, r in res["teacher_forced"].items():
+            lines.append(_row([name, *[f"{r['per_type'][t]:.2f}" if t in r["per_type"] else "–" for t in types], f"{r['all']:.2f}", r["frames"]]))
+        paper = res["paper_table5"]
+        lines.append(_row(["paper Table 5 (own data, units not stated)", *[paper.get(t, "–") for t in types], "–", "–"]))
+        lines += ["", "Per clip (teacher forcing, degrees):", "", _row(["model", *res["test_clips"]]), _row(["---"] * (len(res["test_clips"]) + 1))]
+        for name, r in res["teacher_forced"].items():
+            lines.append(_row([name, *[f"{r['per_clip'].get(c, float('nan')):.2f}" for c in res["test_clips"]]]))
+        fps = res["fps"]
+        lines += ["", "## Autoregressive: error against horizon", "", "![autoregressive error](ar_curve.png)", ""]
+        marks = [h for h in (1, 5, 15, 30, 60, 90, 150) if h <= len(next(iter(res["autoregressive"].values()))["curve_deg"]["all"])]
+        lines += [_row(["model", *[f"{h / fps:.2f} s" for h in marks], "root xz error at the end (m)"]), _row(["---"] * (len(marks) + 2))]
+        for name, r in res["autoregressive"].items():
+            c = r["curve_deg"]["all"]
+            lines.append(_row([name, *[f"{c[h - 1]:.1f}" for h in marks], f"{r['root_xz_error_m'][-1]:.2f}"]))
+        lines += ["", "## Training and generation speed", "", _row(["model", "steps", "samples", "train wall (s)", "samples/s", "final loss (EMA)", "gen frames/s (batch 1, CPU)", "x real time"]),
+                  _row(["---"] * 8)]
+        for name, t in res["training"].items():
+            g = res["generation_speed"][name]
+            lines.append(_row([name, t.get("step"), t.get("samples_seen"), _fmt(t.get("train_wall_s"), 1), _fmt(t.get("samples_per_s"), 0),
+                               _fmt(t.get("train_loss_ema"), 4), f"{g['frames_per_s']:.0f}", f"{g['real_time_factor']:.1f}"]))
+    if "dtw" in res:
+        lines += ["", "## DTW (generated from the first frame + COM path vs ground truth)", "",
+                  "Mean per-frame e_pose (radians, l2 over the movable joints) after DTW alignment; frame-by-frame without alignment in brackets.", "",
+                  _row(["model", *types, "all"]), _row(["---"] * (len(types) + 2))]
+        for name, r in res["dtw"].items():
+            lines.append(_row([name, *[f"{r['per_type'][t]:.3f} ({r['framewise_per_type'][t]:.3f})" if t in r["per_type"] else "–" for t in types],
+                               f"{r['all']:.3f} ({r['framewise_all']:.3f})"]))
+    return "\n".join(lines) + "\n"
+
+
+def _fmt(x, digits: int) -> str:
+    return "–" if x is None else f"{x:.{digits}f}"

@@ -1,0 +1,326 @@
+"""`charctl export RUN --com-path FILE.csv|circle:r=2,speed=1.2 [--crouch-at T] --bvh OUT.bvh --video OUT.mp4`:
+full-body motion from a seed history and a user's COM path (paper §5: "the user drags the COM").
+
+Frames: the seed clip (generate.seed_clip, its first `history` frames) is placed so that its last
+frame stands at the origin facing +z; the COM path is world coordinates in that frame (y up,
+metres), translated horizontally so that its first point is the seed's last COM. Procedural paths
+start there heading +z. The paper's safety (§5) clamps each input COM to at most
+generate.max_com_step metres from the previous input, keeping the direction.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+import time
+from pathlib import Path
+
+import numpy as np
+
+from charctl.errors import CharctlError
+from charctl.experiments.com_cnn.data import XZ, BodyModel, Sequence, canonical_start, heading_frame, heading_yaw, make_sequence
+from charctl.experiments.com_cnn.rollout import Buffer, ReferenceFn, previous_root_reference, rollout
+from charctl.motion import rotations as R
+
+
+# ---------------------------------------------------------------------------- the safety clamp
+def clamp_com_path(path: np.ndarray, start: np.ndarray, max_step: float) -> np.ndarray:
+    """(H, 3) path whose every point is at most `max_step` m from the previous (clamped) one, same direction.
+
+    c'_k = c'_{k-1} + d * min(1, max_step / |d|), d = c_k - c'_{k-1}, c'_{-1} = start (paper §5).
+    Sequential by nature: each point depends on the clamped one before it.
+    """
+    out = np.empty_like(path, dtype=float)
+    prev = np.asarray(start, dtype=float)
+    for k in range(path.shape[0]):
+        d = path[k] - prev
+        n = float(np.linalg.norm(d))
+        prev = prev + (d * (max_step / n) if n > max_step else d)
+        out[k] = prev
+    return out
+
+
+def largest_step(path: np.ndarray, start: np.ndarray) -> tuple[float, int]:
+    steps = np.linalg.norm(np.diff(np.concatenate([start[None], path]), axis=0), axis=1)
+    k = int(np.argmax(steps))
+    return float(steps[k]), k
+
+
+# ---------------------------------------------------------------------------- COM paths
+def read_com_csv(path: str | Path, fps: float) -> np.ndarray:
+    """(H, 3) COM path from a CSV with a header `x,y,z` (one row per frame) or `t,x,y,z` (seconds, resampled)."""
+    p = Path(path)
+    if not p.is_file():
+        raise CharctlError(f"com path: {p} is not a file (give FILE.csv or e.g. circle:r=2,speed=1.2)")
+    try:
+        rows = [r for r in csv.reader(p.read_text().splitlines()) if any(c.strip() for c in r)]
+    except (OSError, UnicodeDecodeError, csv.Error) as exc:
+        raise CharctlError(f"com path {p}: cannot read ({exc})") from None
+    if not rows:
+        raise CharctlError(f"com path {p}: empty file")
+    header = [c.strip().lower() for c in rows[0]]
+    if header not in (["x", "y", "z"], ["t", "x", "y", "z"]):
+        raise CharctlError(f"com path {p}: expected the header 'x,y,z' or 't,x,y,z' (metres, y up; t in seconds), got '{','.join(rows[0])}'")
+    values = np.empty((len(rows) - 1, len(header)))
+    for n, row in enumerate(rows[1:]):
+        if len(row) != len(header):
+            raise CharctlError(f"com path {p}: line {n + 2} has {len(row)} values, the header names {len(header)}")
+        try:
+            values[n] = [float(c) for c in row]
+        except ValueError:
+            raise CharctlError(f"com path {p}: line {n + 2} holds a value that is not a number: {','.join(row)}") from None
+        if not np.all(np.isfinite(values[n])):
+            raise CharctlError(f"com path {p}: line {n + 2} holds a NaN or infinite value")
+    if values.shape[0] < 2:
+        raise CharctlError(f"com path {p}: needs at least 2 rows")
+    if header[0] != "t":
+        return values
+    t = values[:, 0]
+    if np.any(np.diff(t) <= 0):
+        k = int(np.argmax(np.diff(t) <= 0))
+        raise CharctlError(f"com path {p}: times must increase (line {k + 3}: t={t[k + 1]} after t={t[k]})")
+    grid = np.arange(t[0], t[-1] + 1e-9, 1.0 / fps)
+    return np.stack([np.interp(grid, t, values[:, a]) for a in (1, 2, 3)], axis=1)
+
+
+def circle_path(start: np.ndarray, frames: int, fps: float, r: float = 2.0, speed: float = 1.2, dir: str = "left") -> np.ndarray:
+    """A circle of radius r (m) walked at `speed` (m/s) from `start`, initially heading +z, turning left/right."""
+    if r <= 0:
+        raise CharctlError("circle: r must be positive")
+    phi = speed * np.arange(1, frames + 1) / fps / r
+    side = {"left": 1.0, "right": -1.0}.get(dir)
+    if side is None:
+        raise CharctlError(f"circle: dir must be left or right, got {dir!r}")
+    x = start[0] + side * r * (1.0 - np.cos(phi))  # facing +z the character's left is +x
+    return np.stack([x, np.full(frames, start[1]), start[2] + r * np.sin(phi)], axis=1)
+
+
+def line_path(start: np.ndarray, frames: int, fps: float, speed: float = 1.2) -> np.ndarray:
+    """Straight ahead (+z) at `speed` m/s (speed=0: stand still)."""
+    z = start[2] + speed * np.arange(1, frames + 1) / fps
+    return np.stack([np.full(frames, start[0]), np.full(frames, start[1]), z], axis=1)
+
+
+PATHS = {"circle": circle_path, "line": line_path}
+
+
+def procedural_path(spec: str, start: np.ndarray, frames: int, fps: float) -> np.ndarray:
+    """`name:key=value,...` from PATHS, e.g. circle:r=2,speed=1.2,dir=right or line:speed=1.0."""
+    name, _, args = spec.partition(":")
+    kwargs: dict = {}
+    for item in filter(None, (a.strip() for a in args.split(","))):
+        key, eq, value = item.partition("=")
+        if not eq:
+            raise CharctlError(f"com path {spec!r}: '{item}' is not key=value")
+        try:
+            kwargs[key.strip()] = float(value) if key.strip() != "dir" else value.strip()
+        except ValueError:
+            raise CharctlError(f"com path {spec!r}: {key}={value} is not a number") from None
+    fn = PATHS[name]
+    try:
+        return fn(start, frames, fps, **kwargs)
+    except TypeError:
+        import inspect
+
+        names = [p for p in inspect.signature(fn).parameters if p not in ("start", "frames", "fps")]
+        raise CharctlError(f"com path {spec!r}: {name} takes {', '.join(names)}") from None
+
+
+def make_com_path(spec: str, start: np.ndarray, seconds: float, fps: float, crouch_at: float | None, gen_cfg) -> np.ndarray:
+    """The input COM path (H, 3) of a --com-path spec, translated to `start`, with the crouch and the clamp."""
+    name = spec.partition(":")[0]
+    if name in PATHS:
+        path = procedural_path(spec, start, max(1, int(round(seconds * fps))), fps)
+    elif spec.lower().endswith(".csv") or Path(spec).is_file():
+        path = read_com_csv(spec, fps)
+        path = path + (start - path[0]) * XZ  # first point onto the seed's last COM (horizontally)
+    else:
+        raise CharctlError(f"com path {spec!r}: give a .csv file or one of {', '.join(f'{k}:...' for k in PATHS)} (e.g. circle:r=2,speed=1.2)")
+    if crouch_at is not None:
+        t = np.arange(1, path.shape[0] + 1) / fps
+        ramp = np.clip((t - crouch_at) / max(float(gen_cfg.crouch_ramp_s), 1e-9), 0.0, 1.0)
+        path = path - np.outer(ramp, [0.0, float(gen_cfg.crouch_drop), 0.0])
+    step, k = largest_step(path, start)
+    limit = float(gen_cfg.max_com_step)
+    if step > limit + 1e-9:
+        where = "from the seed's COM to the first point" if k == 0 else f"between frames {k - 1} and {k}"
+        msg = f"com path {spec}: jump of {step:.2f} m {where} ({step * fps:.1f} m/s; limit {limit} m/frame)"
+        if not gen_cfg.com_clamp:
+            raise CharctlError(msg + "; fix the path or set generate.com_clamp=true")
+        print(f"note: {msg}; clamped (generate.com_clamp)")
+    return clamp_com_path(path, start, limit) if gen_cfg.com_clamp else path
+
+
+# ---------------------------------------------------------------------------- seed and references
+def seed_sequence(run) -> Sequence:
+    """The seed clip through the dataset pipeline (30 fps, tiled if looping), placed so its frame
+    `history - 1` stands at the origin facing +z."""
+    name = str(run.cfg.generate.seed_clip)
+    seq = next((s for s in run.seqs if s.name == name), None)
+    if seq is None:
+        if run.body.kind != "humanoid":
+            raise CharctlError(f"generate.seed_clip={name!r} is not among the clips of data.bvh_dir ({', '.join(s.name for s in run.seqs[:6])}, ...)")
+        from charctl.motion.library import load_clip
+
+        clip = load_clip(name).resample(run.cfg.data.fps)
+        seq = make_sequence(clip.name, name, clip.label, clip.fps, clip.root_pos, clip.local_rot[:, 0], clip.local_rot[:, 1:],
+                            clip.loop, run.cfg.data, run.body)
+    L = min(int(run.cfg.data.history), seq.num_frames)
+    pos, rot = canonical_start(seq.root_pos[:L][::-1], seq.root_rot[:L][::-1], run.body.forward)  # last frame -> origin, +z
+    pos, rot, joints = pos[::-1].copy(), rot[::-1].copy(), seq.joint_rot[:L]
+    out = Sequence(seq.name, seq.base, seq.label, seq.fps, pos, rot, joints)
+    out.com = run.body.com(pos, rot, joints)
+    return out
+
+
+def estimated_root_reference(body: BodyModel, com_all: np.ndarray, first: int, window: int, min_speed: float, fps: float) -> ReferenceFn:
+    """data.frame=root_t without ground truth: estimate the root's heading frame at t from the COM path.
+
+    Heading: the previous root heading turned by as much as the COM's direction of travel turned
+    over `window` frames (held when the COM moves slower than `min_speed`), so walking sideways or
+    backwards keeps its offset. Position: C_t minus the previous frame's horizontal COM-to-root
+    offset (in its heading frame), rotated by the new heading. com_all (B, L, 3) holds the seed's
+    COM followed by the path; `first` is the buffer index of the first generated frame.
+    """
+    step_min = min_speed * window / fps
+
+    def direction(a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        return np.arctan2(a[..., 0], a[..., 2]), np.linalg.norm(a[..., [0, 2]], axis=-1)
+
+    def ref(k: int, s: int, buf: Buffer, com_t: np.ndarray):
+        pos, rot = buf.root_pos[:, s - 1], buf.root_rot[:, s - 1]
+        joints = R.exp_map(buf.joint_exp[:, s - 1].reshape(pos.shape[0], -1, 3))
+        _, q_prev = heading_frame(pos, rot, body.forward)
+        yaw_prev = heading_yaw(rot, body.forward)
+        offset = R.rotate(R.conjugate(q_prev), (body.com(pos, rot, joints) - pos) * XZ)
+        c = first + k  # index of C_t in com_all
+        a_now, n_now = direction(com_all[:, c] - com_all[:, max(c - window, 0)])
+        a_prev, n_prev = direction(com_all[:, c - 1] - com_all[:, max(c - 1 - window, 0)])
+        turn = np.where((n_now > step_min) & (n_prev > step_min), np.angle(np.exp(1j * (a_now - a_prev))), 0.0)
+        q = R.heading_quat(yaw_prev + turn)
+        return (com_t - R.rotate(q, offset)) * XZ, q
+
+    return ref
+
+
+def reference_for_generation(run, com_all: np.ndarray, first: int) -> ReferenceFn:
+    if run.cfg.data.frame == "root_prev":
+        return previous_root_reference(run.body)
+    g = run.cfg.generate
+    return estimated_root_reference(run.body, com_all, first, int(g.heading_window), float(g.min_com_speed), float(run.cfg.data.fps))
+
+
+def generate(run, com_path: np.ndarray, seed: Sequence) -> tuple[Buffer, float]:
+    """Generated frames (batch 1) for a COM path (H, 3) after `seed`, and the wall time in seconds."""
+    pred = run.predictor()
+    i = pred.history
+    seed_buf = Buffer(seed.root_pos[None], seed.root_rot[None], R.log_map(seed.joint_rot).reshape(1, seed.num_frames, -1))
+    pad = max(i - seed.num_frames, 0)
+    com_all = np.concatenate([np.repeat(seed.com[:1], pad, 0), seed.com, com_path])[None]
+    t0 = time.perf_counter()
+    gen = rollout(pred, run.body, seed_buf, com_path[None], reference_for_generation(run, com_all, pad + seed.num_frames))
+    return gen, time.perf_counter() - t0
+
+
+def generation_speed(run) -> dict:
+    """Frames/s of the whole generation loop at batch 1 on the CPU (eval.speed_frames frames, circle path)."""
+    seed = seed_sequence(run)
+    fps = float(run.cfg.data.fps)
+    frames = int(run.cfg.eval.speed_frames)
+    path = circle_path(seed.com[-1], frames, fps)
+    generate(run, path[:5], seed)  # warm-up
+    _, wall = generate(run, path, seed)
+    return {"frames": frames, "wall_s": wall, "frames_per_s": frames / wall, "real_time_factor": frames / wall / fps}
+
+
+# ---------------------------------------------------------------------------- outputs
+def frames_to_clip(run, name: str, root_pos, root_rot, joint_rot):
+    """A charctl Clip of the humanoid (for write_bvh / render_clip)."""
+    from charctl.motion.clip import Clip
+
+    local = np.concatenate([root_rot[:, None], joint_rot], axis=1)
+    return Clip(name=name, fps=float(run.cfg.data.fps), root_pos=root_pos, local_rot=local, label="generated", skeleton=run.body.skeleton)
+
+
+def write_generic_bvh(body: BodyModel, root_pos, root_rot, joint_rot, fps: float, path: Path) -> Path:
+    """BVH in the source skeleton's hierarchy and channel order (data.bvh_dir runs)."""
+    from scipy.spatial.transform import Rotation
+
+    local = np.concatenate([root_rot[:, None], joint_rot], axis=1)
+    T = local.shape[0]
+    offsets = body.skeleton.offsets / body.bvh_scale
+    cols = []
+    for j, chans in enumerate(body.bvh_channels):  # write time, not a hot path
+        rot_ch = [c for c in chans if c.lower().endswith("rotation")]
+        eul = Rotation.from_quat(local[:, j]).as_euler("".join(c[0].upper() for c in rot_ch), degrees=True) if rot_ch else None
+        for c in chans:
+            axis = "XYZ".index(c[0].upper())
+            if c.lower().endswith("position"):
+                cols.append(root_pos[:, axis] / body.bvh_scale if j == 0 else np.full(T, offsets[j, axis]))
+            else:
+                cols.append(eul[:, rot_ch.index(c)])
+    data = np.stack(cols, axis=1)
+    text = body.bvh_header + f"MOTION\nFrames: {T}\nFrame Time: {1.0 / fps:.8f}\n" + "\n".join(" ".join(f"{v:.6f}" for v in row) for row in data) + "\n"
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(text)
+    return path
+
+
+def plot_paths(com_in: np.ndarray, com_out: np.ndarray, root: np.ndarray, seed_len: int, path: Path) -> None:
+    from charctl.viz.plots import new_figure, save_figure
+
+    fig, ax = new_figure(figsize=(5, 5))
+    ax.plot(com_in[:, 0], com_in[:, 2], "k--", lw=1, label="input COM (clamped)")
+    ax.plot(com_out[seed_len:, 0], com_out[seed_len:, 2], label="generated body COM")
+    ax.plot(root[seed_len:, 0], root[seed_len:, 2], lw=0.8, label="generated root")
+    ax.plot(com_out[:seed_len, 0], com_out[:seed_len, 2], color="gray", label="seed (data)")
+    ax.set_xlabel("x (m)")
+    ax.set_ylabel("z (m)")
+    ax.set_aspect("equal")
+    ax.legend(fontsize=7)
+    ax.set_title("com-cnn generation, top view")
+    save_figure(fig, path)
+
+
+def export_command(target: str, options: dict, overrides: list[str]) -> None:
+    from charctl.experiments.com_cnn.evaluate import load_run, resolve_targets
+
+    run = load_run(resolve_targets([target])[0], overrides)
+    g, fps = run.cfg.generate, float(run.cfg.data.fps)
+    spec = options.get("com_path") or str(g.com_path)
+    seconds = float(options.get("seconds") or g.seconds)
+    seed = seed_sequence(run)
+    com_path = make_com_path(spec, seed.com[-1], seconds, fps, options.get("crouch_at"), g)
+    gen, wall = generate(run, com_path, seed)
+    root_pos = np.concatenate([seed.root_pos, gen.root_pos[0]])
+    root_rot = np.concatenate([seed.root_rot, gen.root_rot[0]])
+    joint_rot = np.concatenate([seed.joint_rot, R.exp_map(gen.joint_exp[0].reshape(gen.joint_exp.shape[1], -1, 3))])
+    com_out = run.body.com(root_pos, root_rot, joint_rot)
+    L = seed.num_frames
+    track = float(np.linalg.norm(com_out[L:] - com_path, axis=1).mean())
+    H = com_path.shape[0]
+    print(f"generated {H} frames ({H / fps:.1f} s) after a {L}-frame seed ({seed.name}) in {wall:.2f} s: "
+          f"{H / wall:.0f} frames/s = {H / wall / fps:.1f}x real time; mean |body COM - input COM| = {track * 100:.1f} cm")
+    bvh, video = options.get("bvh"), options.get("video")
+    if bvh is None and video is None:
+        bvh = run.dir / "generated.bvh"
+    side = Path(bvh or video).with_suffix("")
+    np.savetxt(str(side) + "_com_path.csv", com_path, delimiter=",", header="x,y,z", comments="", fmt="%.5f")
+    plot_paths(com_path, com_out, root_pos, L, Path(str(side) + "_top.png"))
+    if bvh is not None:
+        if run.body.kind == "humanoid":
+            from charctl.motion.bvh import write_bvh
+
+            write_bvh(frames_to_clip(run, "generated", root_pos, root_rot, joint_rot), bvh)
+        else:
+            write_generic_bvh(run.body, root_pos, root_rot, joint_rot, fps, Path(bvh))
+        print(f"wrote {bvh} (frames 0-{L - 1}: seed from the data, {L}-{L + H - 1}: generated)")
+    if video is not None:
+        if run.body.kind != "humanoid":
+            raise CharctlError("--video renders the DeepMimic humanoid; this run was trained on data.bvh_dir (use --bvh)")
+        from charctl.viz.video import render_clip
+
+        info = render_clip(frames_to_clip(run, "generated", root_pos, root_rot, joint_rot), video)
+        print(f"wrote {video} ({info.get('frames', L + H)} frames)")
+    print(f"wrote {side}_com_path.csv and {side}_top.png")

@@ -1,0 +1,349 @@
+"""motion-matching: index vs brute force, features, inertialization, root reconstruction, paths,
+error metric, CSV errors, and end-to-end smoke runs of the sweep and the export (scale=smoke)."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from charctl.errors import CharctlError
+from charctl.motion import rotations as R
+
+EXP = "motion-matching"
+
+
+def smoke_cfg(*overrides: str):
+    from charctl.config import compose_config
+    from charctl.experiments.motion_matching.config import Config
+
+    return compose_config(EXP, ["scale=smoke", *overrides], Config)
+
+
+@pytest.fixture(scope="module")
+def smoke_db():
+    from charctl.experiments.motion_matching.database import build_database
+
+    cfg = smoke_cfg()
+    return cfg, build_database(cfg)
+
+
+# ---------------------------------------------------------------------------- search
+@pytest.mark.parametrize("kind", ["kdtree", "bbox"])
+def test_index_returns_the_brute_force_frame_with_the_same_exclusions(smoke_db, kind):
+    from charctl.experiments.motion_matching.search import make_index, search
+
+    cfg, db = smoke_db
+    brute = make_index("brute", db.search_features)
+    index = make_index(kind, db.search_features)
+    rng = np.random.default_rng(0)
+    inside = 0
+    for _ in range(150):
+        cur = int(rng.choice(db.search_rows))  # a query close to the current frame: its own neighbours win
+        q = db.features[cur] + rng.normal(0.0, 0.05, db.layout.dims)
+        f_ref, d_ref = search(db, brute, q, cur)
+        f_idx, d_idx = search(db, index, q, cur)
+        assert f_idx == f_ref
+        assert d_idx == pytest.approx(d_ref, rel=1e-9, abs=1e-9)
+        assert not db.excluded(np.array([f_ref]), cur)[0]
+        unconstrained, _ = search(db, brute, q, None)
+        inside += bool(db.excluded(np.array([unconstrained]), cur)[0])
+    assert inside > 100  # the window really removes the nearest frames, so the test exercises it
+
+
+def test_exclusion_window_wraps_around_a_loop(smoke_db):
+    cfg, db = smoke_db
+    c = 0
+    rows = db.search_rows[db.clip_id[db.search_rows] == c]
+    first, last = rows[0], rows[-1]  # phases ~0 and ~period-1 of the same cycle
+    assert db.clip_period[c] > 0
+    k = db.exclude_window
+    assert db.excluded(np.array([last]), first)[0]
+    assert not db.excluded(np.array([first + k + 1]), first)[0]
+    other = db.search_rows[db.clip_id[db.search_rows] == 1][0]
+    assert not db.excluded(np.array([other]), first)[0]  # other clips are never excluded
+
+
+# ---------------------------------------------------------------------------- features
+def _straight_source(theta: float, speed: float = 1.2, fps: float = 30.0, T: int = 120):
+    """A synthetic clip moving straight along heading theta, with a bobbing root and swinging legs."""
+    from charctl.experiments.motion_matching.sources import SourceMotion
+    from charctl.motion.clip import Clip
+
+    t = np.arange(T) / fps
+    fwd = np.array([np.cos(theta), -np.sin(theta)])
+    ground = np.outer(speed * t, fwd)
+    root = np.column_stack([ground[:, 0], 0.9 + 0.02 * np.sin(6 * t), ground[:, 1]])
+    local = np.tile(R.IDENTITY, (T, 15, 1))
+    local[:, 0] = R.heading_quat(np.full(T, theta))
+    swing = 0.4 * np.sin(6 * t)
+    local[:, 3] = R.from_axis_angle(np.array([0.0, 0.0, 1.0]), swing)
+    local[:, 9] = R.from_axis_angle(np.array([0.0, 0.0, 1.0]), -swing)
+    clip = Clip("straight", fps, root, local)
+    return SourceMotion("straight", fps, root, local, clip.body_pos, 0, T)
+
+
+def test_features_of_a_straight_line_clip_have_no_lateral_component():
+    from charctl.experiments.motion_matching.database import build_database
+    from charctl.experiments.motion_matching.sources import SkeletonInfo
+    from charctl.motion.skeleton import BODY_NAMES
+
+    cfg = smoke_cfg("features.past_samples=2", "features.direction_weight=0.5")
+    info = SkeletonInfo("humanoid", list(BODY_NAMES), np.array([1.0, 0.0, 0.0]),
+                        [BODY_NAMES.index("right_ankle"), BODY_NAMES.index("left_ankle")])
+    db = build_database(cfg, [_straight_source(0.7)], info)
+    rows = db.search_rows
+    assert rows.size > 10
+    L = db.layout
+    fut = db.raw[rows][:, L.blocks["future_pos"]].reshape(rows.size, -1, 2)
+    vel = db.raw[rows][:, L.blocks["future_vel"]].reshape(rows.size, -1, 2)
+    dirs = db.raw[rows][:, L.blocks["future_dir"]].reshape(rows.size, -1, 2)
+    past = db.raw[rows][:, L.blocks["past_pos"]].reshape(rows.size, -1, 2)
+    np.testing.assert_allclose(fut[..., 1], 0.0, atol=1e-12)
+    np.testing.assert_allclose(vel[..., 1], 0.0, atol=1e-12)
+    np.testing.assert_allclose(dirs[..., 1], 0.0, atol=1e-12)
+    np.testing.assert_allclose(past[..., 1], 0.0, atol=1e-12)
+    # forward components by hand: speed * offset / fps ahead, behind for the past, speed for velocities
+    np.testing.assert_allclose(fut[..., 0], np.broadcast_to(1.2 * L.future_offsets / db.fps, fut[..., 0].shape), atol=1e-12)
+    np.testing.assert_allclose(past[..., 0], np.broadcast_to(-1.2 * L.past_offsets / db.fps, past[..., 0].shape), atol=1e-12)
+    np.testing.assert_allclose(vel[..., 0], 1.2, atol=1e-9)
+    np.testing.assert_allclose(dirs[..., 0], 1.0, atol=1e-12)
+    # the legs swing in the sagittal plane, so the end points have no lateral velocity either
+    ev = db.raw[rows][:, L.blocks["end_vel"]].reshape(rows.size, -1, 3)
+    np.testing.assert_allclose(ev[..., 2], 0.0, atol=1e-9)
+
+
+def test_blocks_are_normalised_and_weighted(smoke_db):
+    cfg, db = smoke_db
+    L = db.layout
+    feats = db.features[db.search_rows]
+    for name, cols in L.blocks.items():
+        x = feats[:, cols] / L.sqrt_w[cols]
+        np.testing.assert_allclose(x.mean(axis=0), 0.0, atol=1e-9)
+        assert x.std(axis=0).mean() == pytest.approx(1.0, rel=1e-6)
+    fp = L.sqrt_w[L.blocks["future_pos"]] ** 2
+    n = cfg.features.future_samples
+    expected = np.repeat(cfg.features.position_weight * cfg.features.discount ** np.arange(n), 2)
+    np.testing.assert_allclose(fp, expected)  # gamma^(i-1) per sample
+
+
+# ---------------------------------------------------------------------------- inertialization
+def test_spring_decay_is_continuous_and_decays_to_zero():
+    from charctl.experiments.motion_matching.inertialization import decay_offsets, inertialize_segment
+
+    x0, v0, hl = np.array([0.3, -1.0]), np.array([2.0, 0.5]), 0.1
+    x, v = decay_offsets(x0, v0, hl, np.array([0.0, 1e-5, -1e-5, 10 * hl, 0.05]))
+    np.testing.assert_allclose(x[0], x0)
+    np.testing.assert_allclose(v[0], v0)
+    np.testing.assert_allclose((x[1] - x[2]) / 2e-5, v0, rtol=1e-6)  # v is the derivative of x
+    y = 2 * np.log(2) / hl  # critically damped: x'' = -2y x' - y^2 x
+    np.testing.assert_allclose((v[1] - v[2]) / 2e-5, -2 * y * v0 - y * y * x0, rtol=1e-5)
+    assert np.all(np.abs(x[3]) < 1e-2 * np.abs(x0).max())
+    # a jump between two signals: out starts at the source and ends on the destination
+    dt = 1 / 120
+    tt = np.arange(121) * dt
+    src, dst = np.sin(tt), 2.0 + 0.5 * tt
+    out, _, _ = inertialize_segment(src[0], 1.0, dst, 0.5, hl, dt)
+    assert out[0] == pytest.approx(src[0])
+    assert abs(out[1] - out[0]) < 0.02 * abs(src[0] - dst[0])  # the 2.0 jump is spread, not shown
+    assert abs(out[-1] - dst[-1]) < 1e-2
+
+
+def test_rollout_pose_has_no_jump_at_transitions(smoke_db):
+    from charctl.experiments.motion_matching.paths import make_path
+    from charctl.experiments.motion_matching.runtime import run_path
+    from charctl.experiments.motion_matching.search import make_index
+
+    cfg, db = smoke_db
+    r = run_path(db, make_index("kdtree", db.search_features), make_path("star", cfg.paths), cfg, with_pose=True)
+    assert r.jumps > 5
+    step = lambda q: R.angle_between(q[1:], q[:-1]).max(axis=1)  # largest joint rotation per frame
+    raw = step(db.pose[r.frames])  # the database frames played, without blending
+    out = step(r.pose)
+    transitions = np.flatnonzero(np.diff(r.frames) != 1)
+    assert raw[transitions].max() > 3 * out[transitions].max()  # the raw jumps are removed
+    assert out.max() < 1.2 * raw[np.diff(r.frames) == 1].max()  # no frame moves more than the data itself does
+    # after a transition, the output converges to the database pose (half-life 0.1 s)
+    settled = R.angle_between(r.pose, db.pose[r.frames]).max(axis=1)
+    assert np.median(settled) < np.median(raw[transitions])
+
+
+def test_root_reconstruction_reproduces_a_played_clip(smoke_db):
+    from charctl.experiments.motion_matching.runtime import accumulate_root
+
+    _, db = smoke_db
+    a = int(db.search_rows[10])
+    n = 40
+    g, h = accumulate_root(db.ground[a], db.heading[a], db.step_local[a:a + n], db.step_heading[a:a + n])
+    np.testing.assert_allclose(g, db.ground[a + 1:a + n + 1], atol=1e-9)
+    np.testing.assert_allclose(np.cos(h), np.cos(db.heading[a + 1:a + n + 1]), atol=1e-9)
+
+
+# ---------------------------------------------------------------------------- paths and errors
+@pytest.mark.parametrize("name", ["circle", "square", "star"])
+def test_error_is_zero_for_a_path_followed_exactly(name):
+    from charctl.experiments.motion_matching.paths import make_path, path_errors
+
+    cfg = smoke_cfg()
+    p = make_path(name, cfg.paths)
+    dt, speed = 1 / 30, 0.9
+    ground = p.point_at(speed * np.arange(int(p.length / speed / dt)) * dt)
+    e = path_errors(p, ground, speed, dt)
+    assert max(e.values()) < 1e-9
+    # a copy shifted sideways by 0.2 m is 0.2 m off in both metrics (away from corners)
+    assert path_errors(p, ground + np.array([0.0, 0.2]), speed, dt)["e_time_mean"] == pytest.approx(0.2, rel=1e-6)
+
+
+def test_error_metrics_differ_in_what_they_reward():
+    from charctl.experiments.motion_matching.paths import make_path, path_errors
+
+    p = make_path("circle", smoke_cfg().paths)
+    dt, speed = 1 / 30, 0.9
+    lagging = p.point_at(0.5 * speed * np.arange(150) * dt)  # on the path, at half the speed
+    e = path_errors(p, lagging, speed, dt)
+    assert e["e_near_mean"] < 1e-3 < 0.5 < e["e_time_mean"]
+
+
+def test_path_shapes_and_csv(tmp_path):
+    from charctl.experiments.motion_matching.paths import make_path
+
+    cfg = smoke_cfg()
+    circle = make_path("circle", cfg.paths)
+    assert circle.length == pytest.approx(2 * np.pi * cfg.paths.circle_radius, rel=1e-4)
+    assert make_path("square", cfg.paths).length == pytest.approx(4 * cfg.paths.square_side)
+    star = make_path("star", cfg.paths)
+    assert star.closed and star.points.shape[0] == 2 * cfg.paths.star_points + 2
+    f = tmp_path / "zig.csv"
+    f.write_text("x,z\n0,0\n1,0\n1,1 # corner\n\n2,1\n")
+    p = make_path(str(f), cfg.paths)
+    assert not p.closed and p.length == pytest.approx(3.0)
+    np.testing.assert_allclose(p.point_at(1.5), [1.0, 0.5])
+    np.testing.assert_allclose(p.point_at(10.0), [2.0, 1.0])  # open paths clamp at the end
+
+
+@pytest.mark.parametrize("text,needle", [
+    ("x,z\n0,0\n1,zero\n", ":3:"),
+    ("0,0\n1,2,3\n", ":2:"),
+    ("0,0\n1;\n", ":2:"),
+    ("0,0\nnan,1\n", ":2:"),
+    ("x,z\n5,5\n", "at least two"),
+])
+def test_bad_path_csv_is_a_one_line_error(tmp_path, text, needle):
+    from charctl.experiments.motion_matching.paths import read_path_csv
+
+    f = tmp_path / "bad.csv"
+    f.write_text(text)
+    with pytest.raises(CharctlError) as err:
+        read_path_csv(f)
+    msg = str(err.value)
+    assert needle in msg and "\n" not in msg
+
+
+def test_bad_path_csv_on_the_command_line(tmp_path):
+    f = tmp_path / "bad.csv"
+    f.write_text("x,z\n0,0\n1,oops\n")
+    exe = Path(sys.executable).with_name("charctl")
+    res = subprocess.run([str(exe), "export", EXP, f"path={f}", "scale=smoke", "--bvh", str(tmp_path / "o.bvh")],
+                         capture_output=True, text=True, timeout=60)
+    assert res.returncode == 2
+    lines = res.stderr.strip().splitlines()
+    assert len(lines) == 1 and "bad.csv:3" in lines[0] and "Traceback" not in res.stderr
+
+
+def test_config_errors_are_one_line():
+    with pytest.raises(CharctlError, match="runtime.index"):
+        smoke_cfg("runtime.index=faiss")
+    with pytest.raises(CharctlError, match="discount"):
+        smoke_cfg("features.discount=0")
+
+
+# ---------------------------------------------------------------------------- Table 1 and end to end
+def test_table1_cases():
+    from charctl.experiments.motion_matching.study import TABLE1, describe, with_case
+
+    assert sorted(TABLE1) == list(range(1, 20))
+    assert [TABLE1[n]["future_samples"] for n in range(1, 8)] == list(range(1, 8))
+    assert describe(9) == "3x33" and describe(18) == "4x25 pos:vel 0.8:0.2 γ0.7"
+    assert TABLE1[10]["past_samples"] > 0 and TABLE1[11]["past_samples"] > 0
+    cfg = with_case(smoke_cfg(), 18)
+    assert (cfg.features.future_samples, cfg.features.future_spacing, cfg.features.discount) == (4, 25, 0.7)
+
+
+def test_sweep_and_export_smoke(tmp_path):
+    from charctl.experiments.motion_matching import evaluate, export
+    from charctl.motion.bvh import read_bvh_as_clip
+
+    out = tmp_path / "sweep"
+    evaluate([EXP], {"sweep": True, "out": out}, ["scale=smoke", "sweep.plots=true", f"output_root={tmp_path}"])
+    data = json.loads((out / "sweep.json").read_text())
+    assert set(data["cases"]) == {"1", "8", "16"}
+    for case in data["cases"].values():
+        for p in ("circle", "square", "star"):
+            r = case["paths"][p]
+            assert 0 < r["e_near_mean"] <= r["e_time_mean"] + 1e-9 and np.isfinite(r["e_time_std"])
+            assert r["searches"] > 5
+    best = data["best_case"]
+    assert f"| {best} ★ |" in (out / "sweep.md").read_text()
+    assert (out / "plots" / "case_08.png").stat().st_size > 1000 and (out / "best.png").is_file()
+    # the best setting with a multi-sample horizon follows the circle within half a metre
+    assert data["cases"]["8"]["paths"]["circle"]["e_time_mean"] < 0.5
+
+    bvh = tmp_path / "star.bvh"
+    export(EXP, {"bvh": bvh, "seconds": 4.0}, ["scale=smoke", "path=star", "case=best", f"output_root={tmp_path}"])
+    clip = read_bvh_as_clip(bvh)
+    assert clip.num_frames == 4 * 30 + 1
+    run = sorted((tmp_path / EXP).glob("*/metrics.json"))[-1]
+    metrics = json.loads(run.read_text())
+    assert metrics["case"] == int(best) and metrics["e_time_mean"] < 1.0
+    assert (run.parent / "path.png").is_file()
+    np.testing.assert_allclose(clip.root_pos[0, [0, 2]], [0.0, 0.0], atol=1e-5)
+
+
+def test_user_bvh_folder_gives_the_same_features_and_exports_its_skeleton(tmp_path):
+    """A BVH folder of the humanoid's own (unrolled) clips: the generic joint-position features
+    match the humanoid database frame for frame, and the result is written on the user's skeleton."""
+    from charctl.experiments.motion_matching.app import write_rollout_bvh
+    from charctl.experiments.motion_matching.database import build_database
+    from charctl.experiments.motion_matching.paths import make_path
+    from charctl.experiments.motion_matching.runtime import run_path
+    from charctl.experiments.motion_matching.search import make_index
+    from charctl.experiments.motion_matching.sources import humanoid_sources
+    from charctl.motion.bvh import read_bvh, write_bvh
+    from charctl.motion.clip import Clip
+
+    base = smoke_cfg("data.clips=[walk,walker/turn_left0]", "data.mirror=false")
+    sources, _ = humanoid_sources(base)
+    folder = tmp_path / "mocap"
+    for s in sources:
+        write_bvh(Clip(s.name.replace("/", "_"), s.fps, s.root_pos, s.local_rot), folder / f"{s.name.replace('/', '_')}.bvh")
+    ref = build_database(base, sources, humanoid_sources(base)[1])
+    cfg = smoke_cfg(f"data.bvh_dir={folder}")
+    db = build_database(cfg)
+    assert db.skeleton.kind == "bvh" and db.skeleton.bvh_scale == 1.0  # metre files (root below 5 units)
+    assert [db.skeleton.joint_names[j] for j in db.skeleton.end_joints] in (["right_ankle", "left_ankle"], ["left_ankle", "right_ankle"])
+    np.testing.assert_allclose(db.skeleton.forward, [1.0, 0.0, 0.0])  # forward axis found from the travel direction
+    # files are sorted by name: turn_left0 (walker_turn_left0.bvh) comes after walk.bvh in both
+    order = np.argsort([n.replace("/", "_") for n in ref.clip_names])
+    for c_bvh, c_ref in enumerate(order):
+        a = slice(db.clip_start[c_bvh], db.clip_stop[c_bvh])
+        b = slice(ref.clip_start[c_ref], ref.clip_stop[c_ref])
+        ends = db.skeleton.end_joints
+        swap = db.skeleton.joint_names[ends[0]] != "right_ankle"
+        ra, rb = db.raw[a], ref.raw[b]
+        if swap:
+            e = ref.layout.blocks["end_pos"]
+            rb = rb.copy()
+            rb[:, e] = np.roll(rb[:, e].reshape(len(rb), 2, 3), 1, axis=1).reshape(len(rb), 6)
+            v = ref.layout.blocks["end_vel"]
+            rb[:, v] = np.roll(rb[:, v].reshape(len(rb), 2, 3), 1, axis=1).reshape(len(rb), 6)
+        np.testing.assert_allclose(ra, rb, atol=2e-3)  # 6-decimal BVH text and Euler round trips
+    r = run_path(db, make_index("kdtree", db.search_features), make_path("circle", cfg.paths), cfg, seconds=2.0)
+    out = write_rollout_bvh(db, r, tmp_path / "out.bvh")
+    back = read_bvh(out)
+    assert back.names == db.skeleton.joint_names and back.num_frames == r.num_frames
+    pos, _ = back.forward_kinematics()
+    np.testing.assert_allclose(pos[:, 0, [0, 2]], r.ground, atol=1e-5)
