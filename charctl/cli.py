@@ -137,13 +137,16 @@ def main() -> None:
         sys.exit(130)
     except SystemExit:
         raise
-    except Exception as exc:  # click usage errors and friends
-        import click
-
-        if isinstance(exc, click.exceptions.Abort):
+    except Exception as exc:  # click usage errors and friends (typer >= 0.16 vendors click as typer._click)
+        name = type(exc).__name__
+        if name == "NoArgsIsHelpError":  # bare `charctl` / `charctl data`: show the help
+            ctx = getattr(exc, "ctx", None)
+            print(ctx.get_help() if ctx is not None else exc)
+            sys.exit(0)
+        if name == "Abort":
             print("aborted", file=sys.stderr)
             sys.exit(130)
-        if isinstance(exc, click.ClickException):
+        if hasattr(exc, "format_message") and hasattr(exc, "exit_code"):  # click.ClickException or typer's copy
             print(f"error: {exc.format_message()}", file=sys.stderr)
             sys.exit(exc.exit_code)
         raise

@@ -66,6 +66,7 @@ def compose_config(experiment: str, overrides: list[str] | None = None, schema: 
     from hydra import compose, initialize_config_dir
     from hydra.errors import HydraException
     from omegaconf import OmegaConf
+    from omegaconf.errors import OmegaConfBaseException
 
     check_experiment(experiment)
     overrides = list(overrides or [])
@@ -73,11 +74,14 @@ def compose_config(experiment: str, overrides: list[str] | None = None, schema: 
     for o in overrides:
         if o.split("=", 1)[0].lstrip("+~") == "experiment":
             raise CharctlError("the experiment is the positional argument, not an override (drop 'experiment=')")
+    overrides = _force_schema_keys(overrides, schema)
     try:
         with initialize_config_dir(str(conf_dir()), version_base="1.3"):
             cfg = compose("config", overrides=[f"experiment={experiment}", *overrides])
     except HydraException as exc:
         raise CharctlError(_explain_hydra_error(exc, experiment, schema)) from None
+    except (OmegaConfBaseException, ValueError, KeyError, IndexError, TypeError) as exc:  # e.g. `a_list.key=1`
+        raise CharctlError(f"bad override for {experiment} ({_first_line(exc)}); overrides: {' '.join(overrides)}") from None
     if schema is not None:
         cfg = validate(cfg, schema, experiment)
     return cfg
@@ -135,6 +139,32 @@ def to_yaml(cfg) -> str:
 
 
 # ---------------------------------------------------------------------------- error messages
+def _schema_keys(schema: type, prefix: str = "") -> set[str]:
+    """Dotted paths of every field of a (nested) dataclass schema."""
+    keys: set[str] = set()
+    for f in dataclasses.fields(schema):
+        keys.add(prefix + f.name)
+        sub = _field_type(f)
+        if dataclasses.is_dataclass(sub):
+            keys |= _schema_keys(sub, f"{prefix}{f.name}.")
+    return keys
+
+
+def _force_schema_keys(overrides: list[str], schema: type | None) -> list[str]:
+    """`key=value` -> `++key=value` for keys the schema defines but the yaml files may not spell out,
+    so Hydra's struct check accepts them; config groups (scale=...) and unknown keys are left alone
+    (an unknown key still fails with the list of valid keys; the schema merge checks the types)."""
+    if schema is None or not dataclasses.is_dataclass(schema):
+        return overrides
+    keys = _schema_keys(schema)
+    groups = {p.name for p in conf_dir().iterdir() if p.is_dir()}
+    out = []
+    for o in overrides:
+        key = o.split("=", 1)[0]
+        out.append("++" + o if key in keys and key.split(".")[0] not in groups else o)
+    return out
+
+
 def _check_override_syntax(overrides: list[str]) -> None:
     for o in overrides:
         if "=" not in o or o.startswith("="):

@@ -114,7 +114,8 @@ def read_run_config(run_dir: str | Path):
     try:
         return OmegaConf.load(cfg_path)
     except Exception as exc:  # malformed YAML
-        raise CharctlError(f"{cfg_path}: cannot read config ({str(exc).splitlines()[0]})") from None
+        first = (str(exc).strip().splitlines() or [type(exc).__name__])[0]
+        raise CharctlError(f"{cfg_path}: cannot read config ({first})") from None
 
 
 def run_experiment(run_dir: str | Path) -> str:
@@ -172,8 +173,6 @@ def save_checkpoint(path: Path, experiment: str, state: dict, signature: dict | 
 
 def load_checkpoint(path: Path, experiment: str, signature: dict | None = None) -> dict:
     """Load a checkpoint with `weights_only=True`; wrong experiment or shapes -> one-line error."""
-    import pickle
-
     import torch
 
     path = Path(path)
@@ -181,8 +180,9 @@ def load_checkpoint(path: Path, experiment: str, signature: dict | None = None) 
         raise CharctlError(f"checkpoint not found: {path}")
     try:
         payload = torch.load(path, map_location="cpu", weights_only=True)
-    except (pickle.UnpicklingError, RuntimeError, EOFError, ValueError) as exc:
-        raise CharctlError(f"{path}: not a readable charctl checkpoint ({str(exc).splitlines()[0][:120]})") from None
+    except Exception as exc:  # torch raises UnpicklingError, RuntimeError, EOFError, KeyError, ... on non-checkpoints
+        first = (str(exc).strip().splitlines() or [type(exc).__name__])[0][:120]
+        raise CharctlError(f"{path}: not a readable charctl checkpoint ({first})") from None
     if not isinstance(payload, dict) or "experiment" not in payload or "state" not in payload:
         raise CharctlError(f"{path}: not a charctl checkpoint")
     if payload["experiment"] != experiment:

@@ -325,7 +325,10 @@ def test_bvh_folder_dataset_and_generic_bvh_writer_round_trip(tmp_path):
     np.testing.assert_allclose(trans[:, 0], seq.root_pos, atol=1e-5)
     assert np.degrees(R.angle_between(rot[:, 1:], seq.joint_rot)).max() < 1e-3
     with pytest.raises(CharctlError) as exc:
-        build_windows(compose(f"data.bvh_dir={folder}"))  # the default test clips are DeepMimic names
+        build_windows(compose(f"data.bvh_dir={folder}", "data.test_clips=[run_01]"))  # joints named root, chest, ...
+    assert_one_line(exc.value, "com.bvh_joints")
+    with pytest.raises(CharctlError) as exc:
+        build_windows(compose(f"data.bvh_dir={folder}", f"com.bvh_joints={{{mapping}}}"))  # DeepMimic test clip names
     assert_one_line(exc.value, "data.test_clips")
 
 

@@ -27,7 +27,7 @@ from charctl.experiments.com_cnn.data import (
     BodyModel, Sequence, WindowSet, heading_frame, load_sequences, motion_type, split_sequences,
 )
 from charctl.experiments.com_cnn.rollout import (
-    Buffer, CnnPredictor, Predictor, fit_nearest_neighbour, given_reference, previous_root_reference, rollout,
+    Buffer, CnnPredictor, LastFrame, Predictor, fit_nearest_neighbour, given_reference, previous_root_reference, rollout,
 )
 from charctl.motion import rotations as R
 
@@ -210,7 +210,7 @@ def evaluate_command(targets: list[str], options: dict, overrides: list[str]) ->
     print(f"held-out clips: {', '.join(s.name for s in test_seqs)}")
     nn = fit_nearest_neighbour(WindowSet(train_seqs, body, int(cfg.data.history), str(cfg.data.frame)),
                                int(cfg.eval.nn_pca_dims), float(cfg.eval.nn_com_weight), int(cfg.seed))
-    preds: list[Predictor] = [r.predictor() for r in runs] + [nn]
+    preds: list[Predictor] = [r.predictor() for r in runs] + [nn, LastFrame(int(cfg.data.history), str(cfg.data.frame))]
     out_dir = Path(options.get("out") or base.dir / "eval")
     out_dir.mkdir(parents=True, exist_ok=True)
     result: dict = {"runs": [str(r.dir) for r in runs], "test_clips": [s.name for s in test_seqs],
@@ -235,17 +235,20 @@ def evaluate_command(targets: list[str], options: dict, overrides: list[str]) ->
 
 # ---------------------------------------------------------------------------- report
 def plot_ar_curves(ar: dict, fps: float, path: Path) -> None:
+    """One panel for all held-out clips, one per paper motion type."""
     from charctl.viz.plots import new_figure, save_figure
 
-    fig, ax = new_figure(figsize=(7, 4))
-    for name, res in ar.items():
-        y = np.asarray(res["curve_deg"]["all"])
-        ax.plot(np.arange(1, len(y) + 1) / fps, y, label=name)
-    ax.set_xlabel("horizon (s) — frames generated from the model's own output")
-    ax.set_ylabel("mean joint-angle error (deg)")
-    ax.set_title("com-cnn autoregressive error on held-out clips")
-    ax.grid(alpha=0.3)
-    ax.legend(fontsize=7)
+    keys = ["all"] + sorted(k for k in next(iter(ar.values()))["curve_deg"] if k != "all")
+    fig, axes = new_figure(1, len(keys), figsize=(4.2 * len(keys), 4), squeeze=False)
+    for ax, key in zip(axes[0], keys):
+        for name, res in ar.items():
+            y = np.asarray(res["curve_deg"].get(key, []))
+            ax.plot(np.arange(1, len(y) + 1) / fps, y, label=name)
+        ax.set_xlabel("horizon (s) of self-fed generation")
+        ax.set_title("all held-out clips" if key == "all" else key)
+        ax.grid(alpha=0.3)
+    axes[0][0].set_ylabel("mean joint-angle error (deg)")
+    axes[0][0].legend(fontsize=6)
     save_figure(fig, path)
 
 

@@ -45,6 +45,19 @@ class CnnPredictor:
             return self.model(h, c).cpu().numpy().astype(float)
 
 
+# ---------------------------------------------------------------------------- zero-velocity reference
+@dataclass
+class LastFrame:
+    """Reference, not a learned model: m̂_t = m_{t-1} (the last history frame, in the same frame)."""
+
+    history: int
+    frame: str
+    name: str = "last history frame (reference)"
+
+    def predict(self, hist: np.ndarray, com: np.ndarray) -> np.ndarray:
+        return np.asarray(hist[:, -1], dtype=float).copy()
+
+
 # ---------------------------------------------------------------------------- nearest neighbour
 @dataclass
 class NearestNeighbour:

@@ -17,7 +17,7 @@ class HopperConfig:
     h: float = 0.01  # s, frame step h of eq 2 and eq 10 (paper Fig 3.5/3.7: 0.01)
     g: float = -9.81  # m/s^2, gravity (negative, as in eq 2 and eq 4)
     touchdown_vy: float = 0.0  # m/s, HIP vertical speed at the first touchdown (eq 1 gives positions only)
-    periodic: bool = True  # evaluate the steady cycle: touchdown speed = the same cycle's landing speed
+    periodic: bool = False  # true: solve the touchdown speed of a steady (repeating) cycle; see docs
     periodic_tol: float = 0.001  # m/s, |landing - touchdown speed| accepted as periodic
     periodic_scan: int = 9  # touchdown speeds scanned in [-max_touchdown_speed, 0] for a sign change
     periodic_iterations: int = 12  # regula-falsi steps in the bracket; no convergence = invalid
@@ -75,7 +75,7 @@ class BoundsConfig:
     """GA gene bounds [low, high] (the paper gives none; see docs/hopper-ga.md)."""
 
     l: list[float] = field(default_factory=lambda: [0.75, 1.05])  # m, leg length (human scale)
-    kappa: list[float] = field(default_factory=lambda: [3000.0, 40000.0])  # N/m, spring constant
+    kappa: list[float] = field(default_factory=lambda: [2000.0, 12000.0])  # N/m, spring constant
     theta0: list[float] = field(default_factory=lambda: [0.1, 0.8])  # rad, touchdown angle (eq 1)
     m: list[float] = field(default_factory=lambda: [40.0, 100.0])  # kg, HIP mass of eq 2
     alpha: list[float] = field(default_factory=lambda: [0.55, 1.0])  # eq 6: extremum of B_c at alpha*T
