@@ -41,10 +41,11 @@ test: install ## install, then run the whole test suite (< 10 min on 2 cores)
 test-slow: install ## the slow learning checks (minutes each)
 	$(PY) -m pytest -q -m slow
 
-demo: install ## install, then run the main job at a small default scale
+demo: install ## install, then the main job at a small default scale: clips, BVH/mp4 export, a short cgail training + evaluation
 	$(CHARCTL) data list
 	$(CHARCTL) export bvh walk -o outputs/demo/walk.bvh
 	$(CHARCTL) export video walk -o outputs/demo/walk.mp4
+	$(MAKE) --no-print-directory demo-cgail
 	@echo "demo artefacts in outputs/demo/"
 
 bench: install ## throughput benchmarks (scripts/bench_*.py)

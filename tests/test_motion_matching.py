@@ -38,8 +38,8 @@ def test_index_returns_the_brute_force_frame_with_the_same_exclusions(smoke_db, 
     from charctl.experiments.motion_matching.search import make_index, search
 
     cfg, db = smoke_db
-    brute = make_index("brute", db.search_features)
-    index = make_index(kind, db.search_features)
+    brute = make_index("brute", db)
+    index = make_index(kind, db)
     rng = np.random.default_rng(0)
     inside = 0
     for _ in range(150):
@@ -159,7 +159,7 @@ def test_rollout_pose_has_no_jump_at_transitions(smoke_db):
     from charctl.experiments.motion_matching.search import make_index
 
     cfg, db = smoke_db
-    r = run_path(db, make_index("kdtree", db.search_features), make_path("star", cfg.paths), cfg, with_pose=True)
+    r = run_path(db, make_index("kdtree", db), make_path("star", cfg.paths), cfg, with_pose=True)
     assert r.jumps > 5
     step = lambda q: R.angle_between(q[1:], q[:-1]).max(axis=1)  # largest joint rotation per frame
     raw = step(db.pose[r.frames])  # the database frames played, without blending
@@ -341,7 +341,7 @@ def test_user_bvh_folder_gives_the_same_features_and_exports_its_skeleton(tmp_pa
             v = ref.layout.blocks["end_vel"]
             rb[:, v] = np.roll(rb[:, v].reshape(len(rb), 2, 3), 1, axis=1).reshape(len(rb), 6)
         np.testing.assert_allclose(ra, rb, atol=2e-3)  # 6-decimal BVH text and Euler round trips
-    r = run_path(db, make_index("kdtree", db.search_features), make_path("circle", cfg.paths), cfg, seconds=2.0)
+    r = run_path(db, make_index("kdtree", db), make_path("circle", cfg.paths), cfg, seconds=2.0)
     out = write_rollout_bvh(db, r, tmp_path / "out.bvh")
     back = read_bvh(out)
     assert back.names == db.skeleton.joint_names and back.num_frames == r.num_frames

@@ -52,6 +52,7 @@ class BatchedHumanoid:
         self.qpos = self.batch.bind("qpos")
         self.qvel = self.batch.bind("qvel")
         self.ctrl = self.batch.bind("ctrl")
+        self.xfrc_applied = self.batch.bind("xfrc_applied")  # (N, nbody, 6) external force/torque, world frame
         self.xpos = self.batch.bind("xpos")  # (N, nbody, 3) body frame origins; body 0 = world
         self.xquat = self.batch.bind("xquat")  # (N, nbody, 4) wxyz
         self.cvel = self.batch.bind("cvel")  # (N, nbody, 6) [angular, linear] at the subtree COM
@@ -82,15 +83,28 @@ class BatchedHumanoid:
         self.batch.reset(ids)
 
     # ------------------------------------------------------------------ stepping
-    def step(self, targets: np.ndarray) -> np.ndarray:
+    def step(self, targets: np.ndarray, force: np.ndarray | None = None, force_substeps: int = 0) -> np.ndarray:
         """Hold PD `targets` (N, nu) radians for one control step; returns the mask of envs that
-        blew up and were reset."""
+        blew up and were reset.
+
+        `force` (N, nbody, 6) world-frame force/torque (xfrc_applied, MuJoCo body ids) acts during
+        the first `force_substeps` physics substeps of this control step (pushes shorter than a
+        control step), then is cleared.
+        """
         self.ctrl[:] = targets
         bad = np.zeros(self.num_envs, dtype=bool)
-        try:
-            self.batch.step(nstep=self.substeps, stage=self._stage_vel)
-        except self._simulation_error as exc:
-            bad[exc.ids] = True
+        chunks = [(self.substeps, None)]
+        if force is not None and force_substeps > 0:
+            k = min(int(force_substeps), self.substeps)
+            chunks = [(k, force), (self.substeps - k, None)]
+        for nstep, f in chunks:
+            if nstep <= 0:
+                continue
+            self.xfrc_applied[:] = 0.0 if f is None else f
+            try:
+                self.batch.step(nstep=nstep, stage=self._stage_vel)
+            except self._simulation_error as exc:
+                bad[exc.ids] = True
         bad |= ~np.isfinite(self.qpos).all(axis=1) | ~np.isfinite(self.qvel).all(axis=1)
         bad |= np.abs(self.qvel).max(axis=1) > self.settings.max_speed
         bad |= self._diverged_by_warnings()

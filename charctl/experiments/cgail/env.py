@@ -154,10 +154,13 @@ class CgailEnv:
         return self._obs
 
     # ------------------------------------------------------------------ step
-    def step(self, actions: np.ndarray) -> StepResult:
-        """Apply PD targets rest + action_scale * actions for one control step."""
+    def step(self, actions: np.ndarray, force: np.ndarray | None = None, force_substeps: int = 0) -> StepResult:
+        """Apply PD targets rest + action_scale * actions for one control step.
+
+        `force` (N, nbody, 6) is an external world-frame push held for the first
+        `force_substeps` physics substeps (push-robustness tests)."""
         targets = self.rest + self.cfg.action_scale * actions
-        unstable = self.sim.step(targets)
+        unstable = self.sim.step(targets, force=force, force_substeps=force_substeps)
         k = sim_kinematics(self.sim)
         final_state = self._policy_state(k)
         pair_next = disc_obs(k)

@@ -192,7 +192,7 @@ def dtw_errors(pred: Predictor, seqs: list[Sequence], body: BodyModel, motion_ty
 
 # ---------------------------------------------------------------------------- command
 def evaluate_command(targets: list[str], options: dict, overrides: list[str]) -> dict:
-    from charctl.experiments.com_cnn.generate import generation_speed
+    from charctl.experiments.com_cnn.generate import generation_demo
 
     if not options.get("pose_error") and not options.get("dtw"):
         raise CharctlError("com-cnn evaluates with --pose-error and/or --dtw")
@@ -220,7 +220,7 @@ def evaluate_command(targets: list[str], options: dict, overrides: list[str]) ->
         horizon = max(1, int(round(float(cfg.eval.horizon_s) * cfg.data.fps)))
         result["teacher_forced"] = {p.name: teacher_forced_errors(p, test_seqs, body, types) for p in preds}
         result["autoregressive"] = {p.name: autoregressive_errors(p, test_seqs, body, horizon, int(cfg.eval.ar_stride), types) for p in preds}
-        result["generation_speed"] = {r.label: generation_speed(r) for r in runs}
+        result["generation"] = {r.label: generation_demo(r, out_dir / f"generation_{n}.png") for n, r in enumerate(runs)}
         result["training"] = {r.label: {k: r.metrics.get(k) for k in ("step", "samples_seen", "train_wall_s", "samples_per_s", "train_loss_ema", "test_loss", "train_windows", "test_windows", "parameters", "device")} for r in runs}
         plot_ar_curves(result["autoregressive"], float(cfg.data.fps), out_dir / "ar_curve.png")
     if options.get("dtw"):
@@ -257,45 +257,74 @@ def _row(cells) -> str:
 
 
 def render_report(res: dict) -> str:
-    """Markdown with the Table 5 style comparison, the autoregressive curve, DTW and speed."""
+    """Markdown: Table 5 style comparison, autoregressive curve, training/generation numbers, DTW."""
     types = list(dict.fromkeys([*res["motion_types"], "other"]))
     lines = ["# com-cnn evaluation", "",
              f"Held-out clips: {', '.join(res['test_clips'])}.  ",
-             f"Training clips: {', '.join(res['train_clips'])} (and mirrors).  ",
-             "Motion types: " + "; ".join(f"{k} = {', '.join(v)}" for k, v in res["motion_types"].items()) + "; other = every other label.", ""]
+             f"Training clips: {', '.join(res['train_clips'])} (and mirrors where data.mirror).  ",
+             "Paper motion types: " + "; ".join(f"{k} = DeepMimic labels {', '.join(v)}" for k, v in res["motion_types"].items()) + "; other = every other label.", ""]
     if "teacher_forced" in res:
-        lines += ["## Teacher forcing (Table 5 style): mean joint-angle error, degrees", "",
-                  "History and C_t from the ground truth; error = angle between predicted and true local joint rotation, "
-                  "averaged over the movable joints and every frame of the held-out clips.", "",
-                  _row(["model", *types, "all", "frames"]), _row(["---"] * (len(types) + 3))]
-        for name, r in res["teacher_forced"].items():
-            lines.append(_row([name, *[f"{r['per_type'][t]:.2f}" if t in r["per_type"] else "–" for t in types], f"{r['all']:.2f}", r["frames"]]))
-        paper = res["paper_table5"]
-        lines.append(_row(["paper Table 5 (own data, units not stated)", *[paper.get(t, "–") for t in types], "–", "–"]))
-        lines += ["", "Per clip (teacher forcing, degrees):", "", _row(["model", *res["test_clips"]]), _row(["---"] * (len(res["test_clips"]) + 1))]
-        for name, r in res["teacher_forced"].items():
-            lines.append(_row([name, *[f"{r['per_clip'].get(c, float('nan')):.2f}" for c in res["test_clips"]]]))
-        fps = res["fps"]
-        lines += ["", "## Autoregressive: error against horizon", "", "![autoregressive error](ar_curve.png)", ""]
-        marks = [h for h in (1, 5, 15, 30, 60, 90, 150) if h <= len(next(iter(res["autoregressive"].values()))["curve_deg"]["all"])]
-        lines += [_row(["model", *[f"{h / fps:.2f} s" for h in marks], "root xz error at the end (m)"]), _row(["---"] * (len(marks) + 2))]
-        for name, r in res["autoregressive"].items():
-            c = r["curve_deg"]["all"]
-            lines.append(_row([name, *[f"{c[h - 1]:.1f}" for h in marks], f"{r['root_xz_error_m'][-1]:.2f}"]))
-        lines += ["", "## Training and generation speed", "", _row(["model", "steps", "samples", "train wall (s)", "samples/s", "final loss (EMA)", "gen frames/s (batch 1, CPU)", "x real time"]),
-                  _row(["---"] * 8)]
-        for name, t in res["training"].items():
-            g = res["generation_speed"][name]
-            lines.append(_row([name, t.get("step"), t.get("samples_seen"), _fmt(t.get("train_wall_s"), 1), _fmt(t.get("samples_per_s"), 0),
-                               _fmt(t.get("train_loss_ema"), 4), f"{g['frames_per_s']:.0f}", f"{g['real_time_factor']:.1f}"]))
+        lines += _teacher_forced_section(res, types) + _autoregressive_section(res, types) + _speed_section(res)
     if "dtw" in res:
-        lines += ["", "## DTW (generated from the first frame + COM path vs ground truth)", "",
-                  "Mean per-frame e_pose (radians, l2 over the movable joints) after DTW alignment; frame-by-frame without alignment in brackets.", "",
+        lines += ["", "## DTW: whole held-out clips generated from their first frame and COM path", "",
+                  "Mean per-frame e_pose (radians, l2 over the movable joints, SPEC §1) after DTW alignment to the ground truth; "
+                  "frame by frame without alignment in brackets.", "",
                   _row(["model", *types, "all"]), _row(["---"] * (len(types) + 2))]
         for name, r in res["dtw"].items():
             lines.append(_row([name, *[f"{r['per_type'][t]:.3f} ({r['framewise_per_type'][t]:.3f})" if t in r["per_type"] else "–" for t in types],
                                f"{r['all']:.3f} ({r['framewise_all']:.3f})"]))
     return "\n".join(lines) + "\n"
+
+
+def _teacher_forced_section(res: dict, types: list[str]) -> list[str]:
+    lines = ["## Teacher forcing (Table 5 style): mean joint-angle error, degrees", "",
+             "History and C_t from the ground truth. Error = angle between the predicted and the true local rotation, "
+             "averaged over the movable joints and every frame of the held-out clips.", "",
+             _row(["model", *types, "all", "frames"]), _row(["---"] * (len(types) + 3))]
+    for name, r in res["teacher_forced"].items():
+        lines.append(_row([name, *[f"{r['per_type'][t]:.2f}" if t in r["per_type"] else "–" for t in types], f"{r['all']:.2f}", r["frames"]]))
+    paper = res["paper_table5"]
+    lines.append(_row(["paper Table 5 (its own mocap; units not stated)", *[paper.get(t, "–") for t in types], "–", "–"]))
+    lines += ["", "Per clip (teacher forcing, degrees):", "", _row(["model", *res["test_clips"]]), _row(["---"] * (len(res["test_clips"]) + 1))]
+    for name, r in res["teacher_forced"].items():
+        lines.append(_row([name, *[f"{r['per_clip'].get(c, float('nan')):.2f}" for c in res["test_clips"]]]))
+    return lines
+
+
+def _autoregressive_section(res: dict, types: list[str]) -> list[str]:
+    fps = res["fps"]
+    ar = res["autoregressive"]
+    n = len(next(iter(ar.values()))["curve_deg"]["all"])
+    marks = [h for h in (1, 5, 15, 30, 60, 90, 150, 300) if h <= n]
+    lines = ["", "## Autoregressive: error against horizon (history = the model's own output)", "",
+             "Seeded with ground-truth history at every " + "k-th frame of each held-out clip, then self-fed; C_t from the ground truth. "
+             "With data.frame=root_t the root's heading frame at t is also the ground truth's (the paper's input needs it); "
+             "with root_prev the model places the root itself.", "", "![autoregressive error](ar_curve.png)", "",
+             _row(["model", "type", *[f"{h / fps:.2f} s" for h in marks], "root xz error at the end (m)"]), _row(["---"] * (len(marks) + 3))]
+    for name, r in ar.items():
+        for key in ["all", *[t for t in types if t in r["curve_deg"]]]:
+            c = r["curve_deg"][key]
+            lines.append(_row([name, key, *[f"{c[h - 1]:.1f}" for h in marks], f"{r['root_xz_error_m'][-1]:.2f}" if key == "all" else ""]))
+    return lines
+
+
+def _speed_section(res: dict) -> list[str]:
+    lines = ["", "## Training and generation", "",
+             _row(["model", "steps", "samples", "train wall (s)", "samples/s", "final loss (EMA)", "gen frames/s (batch 1, CPU)", "x real time", "COM tracking (cm)"]),
+             _row(["---"] * 9)]
+    for name, t in res["training"].items():
+        g = res["generation"][name]
+        lines.append(_row([name, t.get("step"), t.get("samples_seen"), _fmt(t.get("train_wall_s"), 1), _fmt(t.get("samples_per_s"), 0),
+                           _fmt(t.get("train_loss_ema"), 4), f"{g['frames_per_s']:.0f}", f"{g['real_time_factor']:.1f}",
+                           f"{100 * g['com_tracking_error_m']:.1f}"]))
+    lines += ["", "Generation demo (eval): seed = the first frames of the seed clip, then a circle of radius 2 m at 1.2 m/s "
+              "with the COM lowered by generate.crouch_drop from 60 % of the path on. COM tracking = mean distance between the "
+              "generated body's COM (paper mass table) and the input COM.", ""]
+    for n, name in enumerate(res["generation"]):
+        g = res["generation"][name]
+        lines += [f"{name}: root height {g['root_height_m'][0]:.2f}–{g['root_height_m'][1]:.2f} m for an input COM height of "
+                  f"{g['input_com_height_m'][0]:.2f}–{g['input_com_height_m'][1]:.2f} m.", "", f"![generation {n}](generation_{n}.png)", ""]
+    return lines
 
 
 def _fmt(x, digits: int) -> str:

@@ -222,15 +222,37 @@ def generate(run, com_path: np.ndarray, seed: Sequence) -> tuple[Buffer, float]:
     return gen, time.perf_counter() - t0
 
 
-def generation_speed(run) -> dict:
-    """Frames/s of the whole generation loop at batch 1 on the CPU (eval.speed_frames frames, circle path)."""
-    seed = seed_sequence(run)
+def generate_motion(run, spec: str, seconds: float, crouch_at: float | None) -> dict:
+    """Seed + COM path -> the whole motion (seed frames first) and its numbers (speed, COM tracking)."""
     fps = float(run.cfg.data.fps)
-    frames = int(run.cfg.eval.speed_frames)
-    path = circle_path(seed.com[-1], frames, fps)
-    generate(run, path[:5], seed)  # warm-up
-    _, wall = generate(run, path, seed)
-    return {"frames": frames, "wall_s": wall, "frames_per_s": frames / wall, "real_time_factor": frames / wall / fps}
+    seed = seed_sequence(run)
+    com_path = make_com_path(spec, seed.com[-1], seconds, fps, crouch_at, run.cfg.generate)
+    generate(run, com_path[:3], seed)  # warm-up (first-call allocations)
+    gen, wall = generate(run, com_path, seed)
+    n = gen.joint_exp.shape[1]
+    root_pos = np.concatenate([seed.root_pos, gen.root_pos[0]])
+    root_rot = np.concatenate([seed.root_rot, gen.root_rot[0]])
+    joint_rot = np.concatenate([seed.joint_rot, R.exp_map(gen.joint_exp[0].reshape(n, -1, 3))])
+    com_out = run.body.com(root_pos, root_rot, joint_rot)
+    L, H = seed.num_frames, com_path.shape[0]
+    err = np.linalg.norm(com_out[L:] - com_path, axis=1)
+    return {
+        "seed": seed, "com_path": com_path, "root_pos": root_pos, "root_rot": root_rot, "joint_rot": joint_rot, "com_out": com_out,
+        "stats": {"path": spec, "crouch_at_s": crouch_at, "seed_clip": seed.name, "seed_frames": L, "frames": H, "wall_s": wall,
+                  "frames_per_s": H / wall, "real_time_factor": H / wall / fps, "com_tracking_error_m": float(err.mean()),
+                  "com_tracking_error_max_m": float(err.max()), "input_com_height_m": [float(com_path[:, 1].min()), float(com_path[:, 1].max())],
+                  "root_height_m": [float(root_pos[L:, 1].min()), float(root_pos[L:, 1].max())]},
+    }
+
+
+def generation_demo(run, figure: Path | None = None) -> dict:
+    """eval: a circle (r 2 m, 1.2 m/s) with a crouch at 60 % of eval.speed_frames frames, batch 1, CPU."""
+    fps = float(run.cfg.data.fps)
+    seconds = int(run.cfg.eval.speed_frames) / fps
+    out = generate_motion(run, "circle:r=2,speed=1.2", seconds, round(0.6 * seconds, 2))
+    if figure is not None:
+        plot_generation(out, fps, figure)
+    return out["stats"]
 
 
 # ---------------------------------------------------------------------------- outputs
@@ -267,19 +289,52 @@ def write_generic_bvh(body: BodyModel, root_pos, root_rot, joint_rot, fps: float
     return path
 
 
-def plot_paths(com_in: np.ndarray, com_out: np.ndarray, root: np.ndarray, seed_len: int, path: Path) -> None:
+def render_with_com(clip, com: np.ndarray, path: Path) -> dict:
+    """Kinematic playback of the humanoid with the input COM drawn as a purple ball (paper Fig. 1)."""
+    import mujoco
+
+    from charctl.sim.humanoid import load_model, local_rot_to_qpos
+    from charctl.viz.video import render_qpos
+
+    purple = np.array([0.6, 0.2, 0.8, 0.9], dtype=np.float32)
+    z_up_to_y_up = np.array([[1.0, 0, 0], [0, 0, 1.0], [0, -1.0, 0]]).ravel()  # cylinder axis along world +y
+
+    def annotate(scene, t: int) -> None:
+        ball = (mujoco.mjtGeom.mjGEOM_SPHERE, np.array([0.06, 0.0, 0.0]), com[t], np.eye(3).ravel())
+        shadow = (mujoco.mjtGeom.mjGEOM_CYLINDER, np.array([0.07, 0.003, 0.0]), com[t] * [1.0, 0.0, 1.0] + [0, 0.004, 0], z_up_to_y_up)
+        for kind, size, pos, mat in (ball, shadow):
+            if scene.ngeom < scene.maxgeom:
+                mujoco.mjv_initGeom(scene.geoms[scene.ngeom], kind, size, pos, mat, purple)
+                scene.ngeom += 1
+
+    qpos = local_rot_to_qpos(clip.root_pos, clip.local_rot)
+    return render_qpos(load_model(), qpos, path, clip.fps, annotate=annotate)
+
+
+def plot_generation(out: dict, fps: float, path: Path) -> None:
+    """Top view of the input COM, the body's COM and the root; and heights against time."""
     from charctl.viz.plots import new_figure, save_figure
 
-    fig, ax = new_figure(figsize=(5, 5))
+    com_in, com_out, root, L = out["com_path"], out["com_out"], out["root_pos"], out["seed"].num_frames
+    fig, (ax, bx) = new_figure(1, 2, figsize=(10, 4.5))
+    ax.plot(com_out[:L, 0], com_out[:L, 2], color="gray", label="seed (data)")
     ax.plot(com_in[:, 0], com_in[:, 2], "k--", lw=1, label="input COM (clamped)")
-    ax.plot(com_out[seed_len:, 0], com_out[seed_len:, 2], label="generated body COM")
-    ax.plot(root[seed_len:, 0], root[seed_len:, 2], lw=0.8, label="generated root")
-    ax.plot(com_out[:seed_len, 0], com_out[:seed_len, 2], color="gray", label="seed (data)")
+    ax.plot(com_out[L:, 0], com_out[L:, 2], label="generated body COM")
+    ax.plot(root[L:, 0], root[L:, 2], lw=0.8, label="generated root")
     ax.set_xlabel("x (m)")
     ax.set_ylabel("z (m)")
-    ax.set_aspect("equal")
+    ax.set_aspect("equal", adjustable="datalim")
     ax.legend(fontsize=7)
-    ax.set_title("com-cnn generation, top view")
+    ax.set_title("top view")
+    t = (np.arange(com_out.shape[0]) - L + 1) / fps
+    bx.plot(t[L:], com_in[:, 1], "k--", lw=1, label="input COM height")
+    bx.plot(t, com_out[:, 1], label="body COM height")
+    bx.plot(t, root[:, 1], lw=0.8, label="root height")
+    bx.axvline(0.0, color="gray", lw=0.5)
+    bx.set_xlabel("time since the seed ended (s)")
+    bx.set_ylabel("height (m)")
+    bx.legend(fontsize=7)
+    bx.set_title("heights")
     save_figure(fig, path)
 
 
@@ -289,38 +344,30 @@ def export_command(target: str, options: dict, overrides: list[str]) -> None:
     run = load_run(resolve_targets([target])[0], overrides)
     g, fps = run.cfg.generate, float(run.cfg.data.fps)
     spec = options.get("com_path") or str(g.com_path)
-    seconds = float(options.get("seconds") or g.seconds)
-    seed = seed_sequence(run)
-    com_path = make_com_path(spec, seed.com[-1], seconds, fps, options.get("crouch_at"), g)
-    gen, wall = generate(run, com_path, seed)
-    root_pos = np.concatenate([seed.root_pos, gen.root_pos[0]])
-    root_rot = np.concatenate([seed.root_rot, gen.root_rot[0]])
-    joint_rot = np.concatenate([seed.joint_rot, R.exp_map(gen.joint_exp[0].reshape(gen.joint_exp.shape[1], -1, 3))])
-    com_out = run.body.com(root_pos, root_rot, joint_rot)
-    L = seed.num_frames
-    track = float(np.linalg.norm(com_out[L:] - com_path, axis=1).mean())
-    H = com_path.shape[0]
-    print(f"generated {H} frames ({H / fps:.1f} s) after a {L}-frame seed ({seed.name}) in {wall:.2f} s: "
-          f"{H / wall:.0f} frames/s = {H / wall / fps:.1f}x real time; mean |body COM - input COM| = {track * 100:.1f} cm")
+    out = generate_motion(run, spec, float(options.get("seconds") or g.seconds), options.get("crouch_at"))
+    st = out["stats"]
+    L, H = st["seed_frames"], st["frames"]
+    print(f"generated {H} frames ({H / fps:.1f} s) after a {L}-frame seed ({st['seed_clip']}) in {st['wall_s']:.2f} s: "
+          f"{st['frames_per_s']:.0f} frames/s = {st['real_time_factor']:.1f}x real time (batch 1, {run.model.fc[0].weight.device}); "
+          f"mean |body COM - input COM| = {st['com_tracking_error_m'] * 100:.1f} cm")
     bvh, video = options.get("bvh"), options.get("video")
     if bvh is None and video is None:
         bvh = run.dir / "generated.bvh"
-    side = Path(bvh or video).with_suffix("")
-    np.savetxt(str(side) + "_com_path.csv", com_path, delimiter=",", header="x,y,z", comments="", fmt="%.5f")
-    plot_paths(com_path, com_out, root_pos, L, Path(str(side) + "_top.png"))
+    side = str(Path(bvh or video).with_suffix(""))
+    np.savetxt(side + "_com_path.csv", out["com_path"], delimiter=",", header="x,y,z", comments="", fmt="%.5f")
+    plot_generation(out, fps, Path(side + "_plot.png"))
+    frames = (out["root_pos"], out["root_rot"], out["joint_rot"])
     if bvh is not None:
         if run.body.kind == "humanoid":
             from charctl.motion.bvh import write_bvh
 
-            write_bvh(frames_to_clip(run, "generated", root_pos, root_rot, joint_rot), bvh)
+            write_bvh(frames_to_clip(run, "generated", *frames), bvh)
         else:
-            write_generic_bvh(run.body, root_pos, root_rot, joint_rot, fps, Path(bvh))
+            write_generic_bvh(run.body, *frames, fps, Path(bvh))
         print(f"wrote {bvh} (frames 0-{L - 1}: seed from the data, {L}-{L + H - 1}: generated)")
     if video is not None:
         if run.body.kind != "humanoid":
             raise CharctlError("--video renders the DeepMimic humanoid; this run was trained on data.bvh_dir (use --bvh)")
-        from charctl.viz.video import render_clip
-
-        info = render_clip(frames_to_clip(run, "generated", root_pos, root_rot, joint_rot), video)
-        print(f"wrote {video} ({info.get('frames', L + H)} frames)")
-    print(f"wrote {side}_com_path.csv and {side}_top.png")
+        info = render_with_com(frames_to_clip(run, "generated", *frames), np.concatenate([out["seed"].com, out["com_path"]]), Path(video))
+        print(f"wrote {video} ({info['frames']} frames; purple ball = input COM, as in the paper's Fig. 1)")
+    print(f"wrote {side}_com_path.csv (the clamped input COM) and {side}_plot.png")

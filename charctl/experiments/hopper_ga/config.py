@@ -95,7 +95,7 @@ class BalanceConfig:
 class FitnessConfig:
     """eq 12-14."""
 
-    energy_scale: float = 1000.0  # E_r is reported in units of this (J-like units / m); see docs
+    energy_scale: float = 4.0e5  # E_r unit (kg m^2 s^-3 per m): the GA's lowest E_r at 2-10 m/s is ~0.15 of it; see docs
     predict_with_h: bool = True  # gamma's predicted speed is theta_dot_s + theta_ddot_s * h (paper omits h)
     omega_floor: float = 0.1  # rad/s, softens max/min in gamma when a speed is near zero
 
@@ -104,12 +104,12 @@ class FitnessConfig:
 class GAConfig:
     population: int = 100  # paper Fig 5.7: 100 individuals
     generations: int = 100  # paper Fig 5.7: 100 generations
-    tournament: int = 3  # DEAP selTournament size
+    tournament: int = 2  # DEAP selTournament size
     elite: int = 2  # best individuals copied unchanged into the next generation
     cxpb: float = 0.7  # crossover probability per pair (DEAP cxSimulatedBinaryBounded)
-    mutpb: float = 0.3  # mutation probability per individual (DEAP mutPolynomialBounded)
+    mutpb: float = 0.5  # mutation probability per individual (DEAP mutPolynomialBounded)
     cx_eta: float = 15.0  # SBX crowding degree
-    mut_eta: float = 20.0  # polynomial mutation crowding degree
+    mut_eta: float = 10.0  # polynomial mutation crowding degree
     indpb: float = 0.2  # per-gene mutation probability
     init_retries: int = 50  # generation 0: re-draw invalid individuals up to this many rounds
 
@@ -129,8 +129,9 @@ class LimpConfig:
 
 @dataclass
 class ExportConfig:
-    fps: float = 60.0  # BVH / video frame rate
-    seconds: float = 4.0  # length of the exported running motion (whole cycles)
+    fps: float = 60.0  # BVH frame rate
+    video_fps: float = 30.0  # mp4 frame rate
+    seconds: float = 3.0  # length of the exported running motion (rounded up to whole cycles)
 
 
 @dataclass
@@ -196,6 +197,6 @@ class Config(BaseConfig):
                 return f"character.upper: {s.name!r} offset and direction must have 3 numbers"
         if cfg.limp.speed_factor <= 0 or cfg.limp.cycles < 2:
             return "limp.speed_factor must be > 0 and limp.cycles >= 2"
-        if cfg.export.fps <= 0 or cfg.export.seconds <= 0:
-            return "export.fps and export.seconds must be positive"
+        if cfg.export.fps <= 0 or cfg.export.video_fps <= 0 or cfg.export.seconds <= 0:
+            return "export.fps, export.video_fps and export.seconds must be positive"
         return None

@@ -106,7 +106,7 @@ def export(target: str, options: dict, overrides: list[str]) -> None:
     if options.get("video") and cfg.data.bvh_dir:
         raise CharctlError("--video needs the humanoid database; with data.bvh_dir export --bvh only")
     db = build_database(cfg)
-    index = make_index(cfg.runtime.index, db.search_features)
+    index = make_index(cfg.runtime.index, db)
     tic = time.perf_counter()
     rollout = run_path(db, index, path, cfg, with_pose=True, seconds=seconds)
     gen_s = time.perf_counter() - tic

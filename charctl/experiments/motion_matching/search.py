@@ -1,39 +1,68 @@
 """Nearest-neighbour search over the database's searchable frames, skipping the exclusion window.
 
-All indices return the exact constrained nearest neighbour (squared L2 over the weighted,
-normalised features) among the searchable frames that are not within the exclusion window of
-the current frame:
+Every index returns the exact constrained nearest neighbour (squared L2 over the weighted,
+normalised features) among the searchable rows that are not within the exclusion window of the
+current frame (same clip, phase distance < k; circular for unrolled loops):
 
   brute   the reference: every distance, masked argmin (numpy)
   kdtree  scipy cKDTree; asks for the k nearest, takes the first one outside the window and
-          doubles k until one is found (exact: the k nearest overall contain the constrained one)
-  bbox    Holden-style bounding boxes: per block of consecutive frames an axis-aligned box; the
-          blocks are visited in order of their lower-bound distance until it exceeds the best
+          asks for 4x more until one is found (exact: the k nearest overall contain it)
+  bbox    Holden's bounding-box scheme compiled with numba: axis-aligned boxes over runs of 16
+          and 64 consecutive rows (consecutive frames are close, so the boxes are tight); the
+          large boxes are visited in order of their lower-bound distance, a box is skipped when
+          its bound exceeds the best cost so far, and a frame's sum stops as soon as it does
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Callable
 
 import numpy as np
 
 from charctl.experiments.motion_matching.database import Database
 
-ExcludeFn = Callable[[np.ndarray], np.ndarray]  # search rows -> bool mask (True = skip)
+SMALL_BOX = 16  # rows per small box
+LARGE_BOX = 64  # rows per large box (a multiple of SMALL_BOX)
+
+
+@dataclass
+class RowInfo:
+    """Per searchable row: clip id, phase (frames) and loop period (0 = not a loop); window k."""
+
+    clip: np.ndarray
+    phase: np.ndarray
+    period: np.ndarray
+    window: float
+
+    def excluded(self, rows: np.ndarray, clip: int, phase: float) -> np.ndarray:
+        """True for rows of clip `clip` whose (circular) phase distance to `phase` is < window."""
+        d = np.abs(self.phase[rows] - phase)
+        per = self.period[rows]
+        d = np.where(per > 0, np.minimum(d, per - d), d)
+        return (self.clip[rows] == clip) & (d < self.window)
+
+
+def row_info(db: Database) -> RowInfo:
+    rows = db.search_rows
+    c = db.clip_id[rows]
+    return RowInfo(c, db.phase[rows].astype(float), db.clip_period[c].astype(float), float(db.exclude_window))
 
 
 class BruteIndex:
     """Exhaustive search (reference)."""
 
-    def __init__(self, feats: np.ndarray):
-        self.feats = np.ascontiguousarray(feats)
+    def __init__(self, feats: np.ndarray, info: RowInfo):
+        self.feats = np.ascontiguousarray(feats, dtype=float)
         self.sq = np.einsum("ij,ij->i", self.feats, self.feats)
+        self.info = info
+        self.rows = np.arange(feats.shape[0])
 
-    def query(self, q: np.ndarray, exclude: ExcludeFn | None = None) -> tuple[int, float]:
-        """(row, squared distance) of the nearest row not excluded."""
+    def query(self, q: np.ndarray, clip: int = -1, phase: float = 0.0) -> tuple[int, float]:
+        """(row, squared distance) of the nearest row outside the window of (clip, phase); clip -1: none."""
         d2 = self.sq - 2.0 * (self.feats @ q) + q @ q
-        if exclude is not None:
-            d2 = np.where(exclude(np.arange(d2.shape[0])), np.inf, d2)
+        if clip >= 0:
+            d2 = np.where(self.info.excluded(self.rows, clip, phase), np.inf, d2)
         i = int(np.argmin(d2))
         return i, float(max(d2[i], 0.0))
 
@@ -41,19 +70,20 @@ class BruteIndex:
 class KDTreeIndex:
     """scipy cKDTree with an exact post-filter for the exclusion window."""
 
-    def __init__(self, feats: np.ndarray, first_k: int = 8):
+    def __init__(self, feats: np.ndarray, info: RowInfo, first_k: int = 8):
         from scipy.spatial import cKDTree
 
         self.n = feats.shape[0]
-        self.tree = cKDTree(feats, leafsize=16, balanced_tree=False, compact_nodes=True)
+        self.tree = cKDTree(np.asarray(feats, dtype=float), leafsize=16, balanced_tree=False, compact_nodes=True)
         self.first_k = first_k
+        self.info = info
 
-    def query(self, q: np.ndarray, exclude: ExcludeFn | None = None) -> tuple[int, float]:
-        k = min(1 if exclude is None else self.first_k, self.n)
+    def query(self, q: np.ndarray, clip: int = -1, phase: float = 0.0) -> tuple[int, float]:
+        k = min(1 if clip < 0 else self.first_k, self.n)
         while True:
             d, i = self.tree.query(q, k=k)
             d, i = np.atleast_1d(d), np.atleast_1d(i)
-            ok = ~exclude(i) if exclude is not None else np.ones(i.shape, bool)
+            ok = ~self.info.excluded(i, clip, phase) if clip >= 0 else np.ones(i.shape, bool)
             if ok.any():
                 j = int(np.argmax(ok))
                 return int(i[j]), float(d[j] ** 2)
@@ -63,54 +93,60 @@ class KDTreeIndex:
 
 
 class BBoxIndex:
-    """Axis-aligned boxes over blocks of `block` consecutive rows, visited best-bound first."""
+    """Holden's two-level bounding boxes over consecutive rows, compiled with numba."""
 
-    def __init__(self, feats: np.ndarray, block: int = 32, visit: int = 4):
-        self.feats = np.ascontiguousarray(feats)
-        n, d = feats.shape
-        self.block = block
-        nb = -(-n // block)
-        pad = nb * block - n
-        padded = np.concatenate([feats, np.repeat(feats[-1:], pad, axis=0)]) if pad else feats
-        grouped = padded.reshape(nb, block, d)
-        self.lo = grouped.min(axis=1)
-        self.hi = grouped.max(axis=1)
-        self.n = n
-        self.visit = visit
+    def __init__(self, feats: np.ndarray, info: RowInfo):
+        self.feats = np.ascontiguousarray(feats, dtype=float)
+        self.info = info
+        self.small_lo, self.small_hi = _boxes(self.feats, SMALL_BOX)
+        self.large_lo, self.large_hi = _boxes(self.feats, LARGE_BOX)
+        self.kernel = _bbox_kernel()
 
-    def query(self, q: np.ndarray, exclude: ExcludeFn | None = None) -> tuple[int, float]:
-        gap = np.maximum(self.lo - q, 0.0) + np.maximum(q - self.hi, 0.0)
-        bound = np.einsum("ij,ij->i", gap, gap)
-        order = np.argsort(bound)
-        best, best_d = -1, np.inf
-        for start in range(0, order.size, self.visit):
-            boxes = order[start:start + self.visit]
-            if bound[boxes[0]] >= best_d:
-                break
-            rows = (boxes[:, None] * self.block + np.arange(self.block)).ravel()
-            rows = rows[rows < self.n]
-            diff = self.feats[rows] - q
-            d2 = np.einsum("ij,ij->i", diff, diff)
-            if exclude is not None:
-                d2 = np.where(exclude(rows), np.inf, d2)
-            j = int(np.argmin(d2))
-            if d2[j] < best_d:
-                best, best_d = int(rows[j]), float(d2[j])
-        if best < 0:
+    def query(self, q: np.ndarray, clip: int = -1, phase: float = 0.0) -> tuple[int, float]:
+        i, d = self.kernel(self.feats, np.ascontiguousarray(q, dtype=float), self.small_lo, self.small_hi,
+                           self.large_lo, self.large_hi, self.info.clip, self.info.phase, self.info.period,
+                           int(clip), float(phase), self.info.window)
+        if i < 0:
             raise RuntimeError("every searchable frame is excluded")
-        return best, best_d
+        return int(i), float(d)
 
 
-INDEXES: dict[str, Callable[[np.ndarray], object]] = {
+def _boxes(feats: np.ndarray, size: int) -> tuple[np.ndarray, np.ndarray]:
+    """Per-column min/max over runs of `size` consecutive rows."""
+    n, d = feats.shape
+    nb = -(-n // size)
+    pad = nb * size - n
+    padded = np.concatenate([feats, np.repeat(feats[-1:], pad, axis=0)]) if pad else feats
+    grouped = padded.reshape(nb, size, d)
+    return np.ascontiguousarray(grouped.min(axis=1)), np.ascontiguousarray(grouped.max(axis=1))
+
+
+def _bbox_kernel():
+    """The compiled bounding-box search (numba; compiled once and cached on disk)."""
+    try:
+        from charctl.experiments.motion_matching._bbox_numba import bbox_search
+    except ImportError:  # pragma: no cover - numba is a dependency
+        from charctl.errors import CharctlError
+
+        raise CharctlError("runtime.index=bbox needs numba (pip install numba); use runtime.index=kdtree") from None
+    return bbox_search
+
+
+INDEXES: dict[str, Callable[[np.ndarray, RowInfo], object]] = {
     "brute": BruteIndex,
     "kdtree": KDTreeIndex,
     "bbox": BBoxIndex,
 }
 
 
-def make_index(kind: str, feats: np.ndarray):
-    """An index of `kind` over the (M, D) searchable feature rows."""
-    return INDEXES[kind](feats)
+def make_index(kind: str, db_or_feats, info: RowInfo | None = None):
+    """An index of `kind` over a database's searchable rows (or raw (M, D) rows plus their RowInfo)."""
+    if isinstance(db_or_feats, Database):
+        return INDEXES[kind](db_or_feats.search_features, row_info(db_or_feats))
+    if info is None:
+        n = db_or_feats.shape[0]
+        info = RowInfo(np.zeros(n, dtype=np.int64), np.arange(n, dtype=float), np.zeros(n), 0.0)
+    return INDEXES[kind](db_or_feats, info)
 
 
 def search(db: Database, index, query: np.ndarray, cur: int | None) -> tuple[int, float]:
@@ -118,7 +154,8 @@ def search(db: Database, index, query: np.ndarray, cur: int | None) -> tuple[int
 
     Returns (frame index into the database, squared distance).
     """
-    rows = db.search_rows
-    exclude = None if cur is None or db.exclude_window <= 0 else (lambda r: db.excluded(rows[r], cur))
-    row, d2 = index.query(query, exclude)
-    return int(rows[row]), d2
+    if cur is None or db.exclude_window <= 0:
+        row, d2 = index.query(query)
+    else:
+        row, d2 = index.query(query, int(db.clip_id[cur]), float(db.phase[cur]))
+    return int(db.search_rows[row]), d2

@@ -107,7 +107,7 @@ def run_sweep(cfg, out_dir: Path, progress=None) -> dict:
     for case in cases:
         ccfg = with_case(cfg, case)
         db = build_database(ccfg, sources, info)
-        index = make_index(ccfg.runtime.index, db.search_features)
+        index = make_index(ccfg.runtime.index, db)
         results[case] = {"description": describe(case), "paths": {}}
         rollouts[case] = {}
         for name, path in paths.items():

@@ -43,7 +43,9 @@ def srb_push_batch(run, jobs: list[tuple[PushCase, int]], record: bool = False) 
     return (results, traces) if record else results
 
 
-def _simulate_chunk(env, model, chunk, init_noise: float, act, record: bool):
+def _simulate_chunk(env, model, chunk, init_noise: float, act, record: bool, seconds: float | None = None):
+    """Step one SRBEnv whose environment e runs chunk[e] = (case, seed); survived (n,) and, with
+    `record`, the trajectory (then every environment runs `seconds` or the longest case in full)."""
     n = len(chunk)
     env.reset(frames=np.zeros(n, dtype=int))
     for e, (_, seed) in enumerate(chunk):
@@ -60,7 +62,7 @@ def _simulate_chunk(env, model, chunk, init_noise: float, act, record: bool):
     push_dir = np.zeros((n, 3))
     fallen = np.zeros(n, dtype=bool)
     dt, cycle = env.dt, env.ref.cycle
-    steps = int(math.ceil(max(c.total_s for c, _ in chunk) / dt)) + 1
+    steps = int(math.ceil((seconds if seconds else max(c.total_s for c, _ in chunk)) / dt)) + 1
     trace = {"pos": [], "rot": [], "feet": [], "stance": [], "forces": [], "push": []} if record else None
     obs = env.observe()
     for k in range(steps):
@@ -82,7 +84,7 @@ def _simulate_chunk(env, model, chunk, init_noise: float, act, record: bool):
             for key, val in (("pos", env.pos), ("rot", env.rot), ("feet", env.contact_points()), ("stance", env.stance),
                              ("forces", env.last_forces), ("push", push)):
                 trace[key].append(np.array(val, copy=True))
-        if np.all(fallen | (t + dt >= start + duration + observe)):
+        if not record and np.all(fallen | (t + dt >= start + duration + observe)):
             break
         if fallen.any() and not record:  # keep fallen bodies numerically tame; their outcome is recorded
             env.reset(np.flatnonzero(fallen), frames=env.frame[fallen])

@@ -14,7 +14,7 @@ import numpy as np
 
 from charctl.experiments.srb.push import PushCase
 
-FORCE_SCALE = 1.0 / 800.0  # m of arrow per newton (a 60 kg body's weight ~ 0.74 m)
+FORCE_SCALE = 1.0 / 500.0  # m of arrow per newton (a 60 kg body's weight ~ 1.2 m)
 
 
 def srb_mjcf(half_extents: np.ndarray, foot_half_length: float) -> str:
@@ -36,7 +36,7 @@ def srb_mjcf(half_extents: np.ndarray, foot_half_length: float) -> str:
     <geom name="floor" type="plane" size="40 40 0.1" quat="0.70710678 -0.70710678 0 0" material="grid" contype="0" conaffinity="0"/>
     <body name="box" pos="0 1 0"><freejoint/>
       <geom type="box" size="{hx:.4f} {hy:.4f} {hz:.4f}" rgba="0.8 0.8 0.78 0.85" contype="0" conaffinity="0"/>
-      <camera name="side" mode="trackcom" pos="0 0.2 4.5" xyaxes="1 0 0 0 0.995 -0.1"/>
+      <camera name="side" mode="trackcom" pos="-2.4 1.0 2.8" xyaxes="0.759 0 0.651 0.164 0.968 -0.191"/>
     </body>
     {feet}
   </worldbody>
@@ -61,7 +61,7 @@ def trace_to_qpos(trace: dict, env_index: int = 0) -> np.ndarray:
     return q
 
 
-def _arrow(scene, start: np.ndarray, end: np.ndarray, rgba, width: float = 0.015) -> None:
+def _arrow(scene, start: np.ndarray, end: np.ndarray, rgba, width: float = 0.025) -> None:
     import mujoco
 
     if scene.ngeom >= scene.maxgeom or np.linalg.norm(end - start) < 1e-4:
@@ -86,7 +86,7 @@ def render_push_video(run, path: str | Path, seconds: float = 6.0) -> dict:
     agent, _ = load_policy(run)
     env = SRBEnv(run.cfg, 1, seed=0, auto_reset=False, max_steps=10**9)
     first = PushCase("impulse", 400.0, 0.2, 90.0, 0.25, settle_s=1.5, observe_s=max(seconds - 1.5 - 0.2 - env.ref.cycle_seconds, 0.5))
-    _, trace = _simulate_chunk(env, agent.model, [(first, 0)], 0.0, policy_actions, record=True)
+    _, trace = _simulate_chunk(env, agent.model, [(first, 0)], 0.0, policy_actions, record=True, seconds=seconds)
     model = mujoco.MjModel.from_xml_string(srb_mjcf(env.body.half_extents, env.body.foot_half_length))
     qpos = trace_to_qpos(trace)
 
@@ -97,7 +97,7 @@ def render_push_video(run, path: str | Path, seconds: float = 6.0) -> dict:
         push = trace["push"][t, 0]
         if np.linalg.norm(push) > 0:
             com = trace["pos"][t, 0]
-            _arrow(scene, com - push * FORCE_SCALE * 1.5, com, (0.9, 0.1, 0.1, 1.0), width=0.03)
+            _arrow(scene, com - push * FORCE_SCALE, com, (0.9, 0.1, 0.1, 1.0), width=0.04)
 
     info = render_qpos(model, qpos, path, fps=1.0 / float(trace["dt"]), camera="side", annotate=annotate)
     info["pushes"] = f"{first.force_n:.0f} N to the left for {first.duration_s:g} s at t = {float(trace['start'][0]):.2f} s"

@@ -1,0 +1,61 @@
+"""Push trials on a trained cgail walk policy: the full-body baseline of the srb push study.
+
+`make_push_simulator(run_dir)` returns `simulate(case, seed) -> survived` following the
+protocol of charctl.experiments.srb.push.PushCase: the character starts from walk frame 0
+(RSI, heading +x), walks `settle_s + phase * cycle_s` seconds, a constant horizontal force of
+`force_n` newtons acts on the root (pelvis) body for `duration_s` seconds (applied per physics
+substep, so windows shorter than a control step deliver exactly force x duration), in the
+direction `direction_deg` of the heading frame at push onset (0 forward, 90 left), and the
+trial survives if no fall (a non-foot body touching the ground) happens before `observe_s`
+after the window closes. The seed sets the env's random generator only.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from charctl.errors import CharctlError
+from charctl.experiments.cgail.policy import load_trained_run
+from charctl.motion import rotations as R
+
+
+def make_push_simulator(run_dir, skill: str = "walk"):
+    tr = load_trained_run(run_dir)
+    if skill not in tr.skill_names:
+        raise CharctlError(f"{run_dir} has no {skill!r} skill (skills: {', '.join(tr.skill_names)}); train one with use_skills=[walk]")
+    k = tr.skill_index(skill)
+
+    def simulate(case, seed: int) -> bool:
+        env = tr.make_env(1, seed=int(seed), switch_prob=0.0, episode_seconds=1e6)
+        env.forced_command = np.array([k])
+        env.start_frame = 0
+        env.random_yaw = False
+        env.reset(np.array([0]))
+        hz = env.cfg.control_hz
+        sub_dt = 1.0 / env.cfg.physics_hz
+        start = case.settle_s + case.phase * case.cycle_s
+        end = start + case.duration_s
+        total = end + case.observe_s
+        root = env.sim.body_ids[0]
+        force = np.zeros((1, env.sim.model.nbody, 6))
+        direction = None
+        for step in range(int(np.ceil(total * hz))):
+            t0 = step / hz
+            t1 = t0 + 1.0 / hz
+            f, n_sub = None, 0
+            if t1 > start and t0 < end:
+                if direction is None:  # fixed in the world at the push onset
+                    a = R.yaw_about_y(env.sim.body_quat_xyzw[0, 0]) + np.radians(case.direction_deg)
+                    direction = np.array([np.cos(a), 0.0, -np.sin(a)])
+                # physics substeps of this control step inside the window; the onset is quantised
+                # to the control step, the length to the physics substep (round(duration / dt))
+                n_sub = max(1, int(round((min(t1, end) - max(t0, start)) / sub_dt)))
+                force[0, root, :3] = case.force_n * direction
+                f = force
+            res = env.step(tr.mean_action(env), force=f, force_substeps=n_sub)
+            if res.terminated[0]:
+                return False
+        return True
+
+    return simulate
+

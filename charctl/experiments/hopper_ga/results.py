@@ -1,0 +1,99 @@
+"""What a finished (or interrupted) run writes: best genome JSON, gait numbers, the limp test,
+the figures; shared by `train`, `eval --curves`, `export` and the repro report."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from charctl.errors import CharctlError
+from charctl.experiments.hopper_ga.model import Settings, describe_invalid, evaluate_genomes
+
+
+def gait_summary(genome: np.ndarray, s: Settings) -> dict:
+    """eval, gamma, E_r, E and the gait numbers of one genome (one cycle = one step)."""
+    m = {k: v[0] for k, v in evaluate_genomes(np.asarray(genome, dtype=float)[None], s).items()}
+    if not m["valid"]:
+        raise CharctlError(f"the genome is physically impossible: {describe_invalid(int(m['code']))}")
+    cycle = float(m["stance_time"] + m["flight_time"])
+    return {
+        "eval": float(m["fitness"]),
+        "gamma": float(m["gamma"]),
+        "E_r": float(m["E_r"]),
+        "E": float(m["E"]),
+        "stance_time_s": float(m["stance_time"]),
+        "flight_time_s": float(m["flight_time"]),
+        "cycle_time_s": cycle,
+        "step_length_m": float(m["step_length"]),
+        "stride_length_m": 2.0 * float(m["step_length"]),  # right + left step
+        "cadence_spm": 60.0 / cycle,  # steps per minute
+    }
+
+
+def genome_dict(genome: np.ndarray, s: Settings) -> dict[str, float]:
+    return {n: float(v) for n, v in zip(s.gene_names, genome)}
+
+
+def limp_test(genome: np.ndarray, s: Settings, cycles: int, factor: float):
+    """Normal run vs a run whose left-leg cycles go `factor` times faster (paper Fig 3.13)."""
+    from charctl.experiments.hopper_ga.motion import run_motion
+
+    normal = run_motion(genome, s, cycles)
+    limping = run_motion(genome, s, cycles, limp_factor=factor)
+
+    def stance(m, leg: int) -> float:
+        """Mean stance duration (s) of one leg: its support time / its number of stances."""
+        on = m.support == leg
+        dt = m.rollout.timeline.dt[0]
+        starts = int(np.sum(on[1:] & ~on[:-1])) + int(on[0])
+        return float(np.sum(dt[1:][on[1:]]) / max(starts, 1))
+
+    numbers = {
+        "speed_factor": factor,
+        "normal_mean_com_z_m": float(np.mean(normal.com[:, 2])),
+        "limp_mean_com_z_m": float(np.mean(limping.com[:, 2])),
+        "normal_stance_right_s": stance(normal, 0),
+        "normal_stance_left_s": stance(normal, 1),
+        "limp_stance_right_s": stance(limping, 0),
+        "limp_stance_left_s": stance(limping, 1),
+        "com_tracking_rms_m": float(np.sqrt(np.mean(np.sum((normal.com[:, [0, 2]] - normal.target) ** 2, 1)))),
+    }
+    return normal, limping, numbers
+
+
+def write_outputs(out: Path, history: dict, genome: np.ndarray, s: Settings, cfg, figures: bool = True) -> dict:
+    """best_genome.json, figures (fitness curve, COM path, limp, strip) and the numbers."""
+    from charctl.experiments.hopper_ga import plots
+    from charctl.experiments.hopper_ga.motion import run_motion
+    from charctl.runs import atomic_write_text
+
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    gait = gait_summary(genome, s)
+    label = f"speed {s.speed:g} m/s, beta {s.beta:g}"
+    doc = {"speed": s.speed, "beta": s.beta, "generations": len(history["best"]) - 1, **gait, "genes": genome_dict(genome, s)}
+    atomic_write_text(out / "best_genome.json", json.dumps(doc, indent=2))
+    normal, limping, limp_numbers = limp_test(genome, s, int(cfg.limp.cycles), float(cfg.limp.speed_factor))
+    if figures:
+        plots.fitness_curve(history, out / "fitness_curve.png", label)
+        plots.com_path(normal, out / "com_path.png", f"{label}: target vs actual COM")
+        plots.limp(normal, limping, out / "limp.png", f"{label}: left leg limps (HIP speed x{cfg.limp.speed_factor:g} on its stance)")
+        plots.strip(run_motion(genome, s, 2), s, genome[0], out / "strip.png", f"{label}: two steps")
+    return {"gait": gait, "limp": limp_numbers}
+
+
+def load_best(run_dir: Path) -> tuple[np.ndarray, dict]:
+    """The best genome of a run (best_genome.json, else the checkpoint's hall of fame)."""
+    path = Path(run_dir) / "best_genome.json"
+    if path.is_file():
+        doc = json.loads(path.read_text())
+        return np.array(list(doc["genes"].values()), dtype=float), doc
+    ckpt = Path(run_dir) / "checkpoints" / "last.pt"
+    if ckpt.is_file():
+        from charctl.runs import load_checkpoint
+
+        state = load_checkpoint(ckpt, "hopper-ga")
+        return state["best_genome"].numpy().astype(float), {}
+    raise CharctlError(f"{run_dir} has no best_genome.json or checkpoint; train first: charctl train hopper-ga")

@@ -1,0 +1,82 @@
+"""cgail throughput, measured in one run on the same batch:
+
+    .venv/bin/python scripts/bench_cgail.py [--envs 64] [--iters 4] [overrides...]
+
+1. raw batched physics: BatchedHumanoid.step with fixed PD targets (control steps/s = samples/s)
+2. rollout: sim + observations + policy forward + discriminator reward (samples/s)
+3. the whole training loop (rollout + reward + PPO + discriminator update), with time fractions.
+Prints rollout/raw (target >= 70 %) and what limits it.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+import numpy as np
+import torch
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--envs", type=int, default=64)
+    ap.add_argument("--iters", type=int, default=4)
+    ap.add_argument("overrides", nargs="*", default=["scale=small"])
+    a = ap.parse_args()
+    from charctl.config import compose_config
+    from charctl.experiments.cgail.config import Config
+    from charctl.experiments.cgail.env import CgailEnv
+    from charctl.experiments.cgail.trainer import build_agent, collect_rollout, discriminator_rewards, total_reward, update_discriminator
+
+    cfg = compose_config("cgail", [*a.overrides, f"env.num_envs={a.envs}"], Config)
+    torch.set_num_threads(int(cfg.train.torch_threads))
+    agent = build_agent(cfg)
+    env = CgailEnv(agent.skills, cfg.env, seed=0)
+    T = cfg.train.rollout_steps
+    # 1. raw batched physics on the same env batch
+    targets = np.zeros((env.N, env.sim.layout.nu))
+    env.reset(np.arange(env.N))
+    t0 = time.perf_counter()
+    for i in range(T * a.iters):
+        env.sim.step(targets)
+        if i % 15 == 14:
+            env.reset(np.arange(env.N))
+    raw = T * a.iters * env.N / (time.perf_counter() - t0)
+    # 2. rollout incl. discriminator reward
+    collect_rollout(agent, env, 4)
+    t0 = time.perf_counter()
+    for _ in range(a.iters):
+        ro = collect_rollout(agent, env, T)
+        discriminator_rewards(agent, ro)
+    rollout = T * a.iters * env.N / (time.perf_counter() - t0)
+    # 3. full training iterations
+    rng = np.random.default_rng(0)
+    phases = {"rollout": 0.0, "reward": 0.0, "ppo": 0.0, "disc": 0.0}
+    t_all = time.perf_counter()
+    for _ in range(a.iters):
+        t0 = time.perf_counter()
+        ro = collect_rollout(agent, env, T)
+        t1 = time.perf_counter()
+        rew = discriminator_rewards(agent, ro)
+        ro.storage.rewards = total_reward(agent, rew, ro.r_goal) + ro.bootstrap
+        with torch.no_grad():
+            lv = agent.model.value(torch.as_tensor(env.state, dtype=torch.float32), torch.as_tensor(env.command_blend(), dtype=torch.float32))
+        ro.storage.finish(lv, cfg.ppo.gamma, cfg.ppo.lam)
+        t2 = time.perf_counter()
+        agent.ppo.update(ro.storage)
+        t3 = time.perf_counter()
+        update_discriminator(agent, ro, rng)
+        t4 = time.perf_counter()
+        for k, v in zip(phases, (t1 - t0, t2 - t1, t3 - t2, t4 - t3)):
+            phases[k] += v
+    full = T * a.iters * env.N / (time.perf_counter() - t_all)
+    total = sum(phases.values())
+    print(f"cgail bench: {env.N} envs, physics {cfg.env.physics_hz:.0f} Hz / control {cfg.env.control_hz:.0f} Hz, policy {list(cfg.ppo.hidden)}, disc {list(cfg.disc.hidden)}")
+    print(f"  raw batched physics     {raw:10,.0f} samples/s (control steps of all envs)")
+    print(f"  rollout (+obs, policy, disc reward) {rollout:10,.0f} samples/s = {100 * rollout / raw:.0f} % of raw physics (target >= 70 %)")
+    print(f"  whole training loop     {full:10,.0f} samples/s")
+    print("  time per phase: " + ", ".join(f"{k} {100 * v / total:.0f} %" for k, v in phases.items()))
+
+
+if __name__ == "__main__":
+    main()
