@@ -172,6 +172,20 @@ def test_rollout_pose_has_no_jump_at_transitions(smoke_db):
     assert np.median(settled) < np.median(raw[transitions])
 
 
+def test_root_motion_blend_continues_the_previous_step(smoke_db):
+    from charctl.experiments.motion_matching.runtime import PoseBlend
+
+    _, db = smoke_db
+    a, b = int(db.search_rows[5]), int(db.search_rows[-40])
+    blend = PoseBlend(db, a, halflife=0.1, with_pose=False, root=True)
+    steps, dh = blend.segment(a, a, 10)  # no transition: exactly the database's steps
+    np.testing.assert_allclose(steps, db.step_local[a:a + 10])
+    steps, dh = blend.segment(a + 10, b, 30)  # a jump: the first step is the one that would have come next
+    np.testing.assert_allclose(steps[0], db.step_local[a + 10], atol=1e-12)
+    assert dh[0] == pytest.approx(db.step_heading[a + 10])
+    assert np.abs(steps[-1] - db.step_local[b + 29]).max() < 0.05 * np.abs(steps[0] - db.step_local[b]).max() + 1e-9
+
+
 def test_root_reconstruction_reproduces_a_played_clip(smoke_db):
     from charctl.experiments.motion_matching.runtime import accumulate_root
 
@@ -301,6 +315,10 @@ def test_sweep_and_export_smoke(tmp_path):
     assert metrics["case"] == int(best) and metrics["e_time_mean"] < 1.0
     assert (run.parent / "path.png").is_file()
     np.testing.assert_allclose(clip.root_pos[0, [0, 2]], [0.0, 0.0], atol=1e-5)
+    from charctl.experiments.motion_matching.report import write_report
+
+    text = write_report(out).read_text()
+    assert "| 8 |" in text and "searches in the sweep ended in a jump" in text and "walker/turn_left0" in text
 
 
 def test_user_bvh_folder_gives_the_same_features_and_exports_its_skeleton(tmp_path):

@@ -276,12 +276,14 @@ def train(cfg, run) -> dict:
             rew = discriminator_rewards(agent, ro)
             reward = total_reward(agent, rew, ro.r_goal) + ro.bootstrap
             ro.storage.rewards = reward
-            agent.model.obs_norm.update(ro.storage.obs)
             with torch.no_grad():
                 last_v = agent.model.value(torch.as_tensor(env.state, dtype=torch.float32), torch.as_tensor(env.command_blend(), dtype=torch.float32) if agent.conditional else None)
             ro.storage.finish(last_v, cfg.ppo.gamma, cfg.ppo.lam)
             t2 = time.perf_counter()
             ppo_stats = agent.ppo.update(ro.storage)
+            # normaliser statistics move only after the update, so the PPO ratio starts at exactly 1
+            # (updating before it shifts every input and inflates the clip fraction)
+            agent.model.obs_norm.update(ro.storage.obs)
             t3 = time.perf_counter()
             disc_stats = update_discriminator(agent, ro, rng)
             t4 = time.perf_counter()

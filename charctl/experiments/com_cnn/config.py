@@ -81,7 +81,7 @@ class ModelConfig:
 
 @dataclass
 class TrainConfig:
-    steps: int = 8000  # minibatch updates
+    steps: int = 3000  # minibatch updates
     batch_size: int = 64  # paper silent
     optimizer: str = "sgd"  # paper §4: SGD | adam | adamw
     lr: float = 0.01  # paper silent

@@ -23,7 +23,7 @@ import numpy as np
 from charctl.errors import CharctlError
 from charctl.motion import rotations as R
 from charctl.motion.fk import center_of_mass, forward_kinematics
-from charctl.motion.skeleton import HINGE_JOINTS, Skeleton, load_skeleton
+from charctl.motion.skeleton import CLIP_JOINTS, HINGE_JOINTS, Skeleton, load_skeleton
 
 XZ = np.array([1.0, 0.0, 1.0])
 Z_AXIS = np.array([0.0, 0.0, 1.0])
@@ -73,8 +73,6 @@ def humanoid_body(com_cfg) -> BodyModel:
     skel = load_skeleton()
     masses = map_masses(com_cfg.mass_table, com_cfg.humanoid_bodies, skel.names, "com.humanoid_bodies")
     joints = skel.names[1:]
-    from charctl.motion.skeleton import CLIP_JOINTS
-
     return BodyModel(
         kind="humanoid", skeleton=skel, masses=masses, forward=np.array([1.0, 0.0, 0.0]),
         hinge=np.array([n in HINGE_JOINTS for n in joints]), fixed=np.array([n not in CLIP_JOINTS for n in joints]),
@@ -209,6 +207,7 @@ def bvh_label(rel: Path) -> str:
 def load_bvh_dir(cfg) -> tuple[list[Sequence], BodyModel]:
     """Every .bvh under `data.bvh_dir` (one skeleton, y up) as sequences; the body model from the first file."""
     from charctl.motion.bvh import read_bvh
+    from charctl.motion.clip import Clip
 
     root = Path(cfg.data.bvh_dir).expanduser()
     if not root.is_dir():
@@ -226,8 +225,6 @@ def load_bvh_dir(cfg) -> tuple[list[Sequence], BodyModel]:
         trans, rot = motion.local_transforms()
         rel = path.relative_to(root)
         name = str(rel.with_suffix(""))
-        from charctl.motion.clip import Clip
-
         clip = Clip(name=name, fps=motion.fps, root_pos=trans[:, 0] * cfg.data.bvh_scale, local_rot=rot, skeleton=body.skeleton)
         if clip.num_frames < 2:
             raise CharctlError(f"{path}: needs at least 2 frames")
@@ -273,7 +270,7 @@ def split_sequences(seqs: list[Sequence], test_clips) -> tuple[list[Sequence], l
     known = {s.base for s in seqs}
     missing = sorted(test_set - known)
     if missing:
-        raise CharctlError(f"data.test_clips {missing} are not among the clips ({', '.join(sorted(known)[:8])}, ...)")
+        raise CharctlError(f"data.test_clips {missing} are not among the clips ({', '.join(sorted(known)[:8])}, ...); set data.test_clips=[...]")
     train = [s for s in seqs if s.base not in test_set]
     test = [s for s in seqs if s.base in test_set]
     if not train:

@@ -43,12 +43,14 @@ class LoadedRun:
     body: BodyModel
     seqs: list[Sequence]
     metrics: dict
+    suffix: str = ""  # tells apart runs whose settings read the same
 
     @property
     def label(self) -> str:
         m, d = self.cfg.model, self.cfg.data
         kind = "CNN, history + COM" if m.use_com else "CNN, history only"
-        return f"{kind} (i={d.history}, w={m.kernel}, ch={'/'.join(str(c) for c in m.channels)}, {d.frame})"
+        extra = "".join(f", {k}={v}" for k, v in (("fc", m.fc_activation), ("opt", self.cfg.train.optimizer)) if v not in ("none", "sgd"))
+        return f"{kind} (i={d.history}, w={m.kernel}, ch={'/'.join(str(c) for c in m.channels)}, {d.frame}{extra}){self.suffix}"
 
     def predictor(self) -> CnnPredictor:
         return CnnPredictor(self.label, self.model, int(self.cfg.data.history), str(self.cfg.data.frame))
@@ -197,6 +199,10 @@ def evaluate_command(targets: list[str], options: dict, overrides: list[str]) ->
     if not options.get("pose_error") and not options.get("dtw"):
         raise CharctlError("com-cnn evaluates with --pose-error and/or --dtw")
     runs = [load_run(d, overrides) for d in resolve_targets(targets)]
+    labels = [r.label for r in runs]
+    for r in runs:
+        if labels.count(r.label) > 1:
+            r.suffix = f" [{r.dir.name}]"
     base = runs[0]
     for r in runs[1:]:
         diff = [k for k in SPLIT_KEYS if r.cfg.data[k] != base.cfg.data[k]]

@@ -186,6 +186,8 @@ class Config(BaseConfig):
         if cfg.fitness.energy_scale <= 0 or cfg.fitness.omega_floor <= 0:
             return "fitness.energy_scale and fitness.omega_floor must be positive"
         names = [s.name for s in cfg.character.upper]
+        if not names:
+            return "character.upper must list the upper-body joints (chest, neck, shoulders, elbows)"
         if len(set(names)) != len(names):
             return f"character.upper joint names must be unique, got {names}"
         for s in cfg.character.upper:

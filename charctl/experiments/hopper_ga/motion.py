@@ -14,7 +14,6 @@ from pathlib import Path
 import numpy as np
 
 from charctl.errors import CharctlError
-from charctl.experiments.hopper_ga.character import upper_fk
 from charctl.experiments.hopper_ga.model import (
     Rollout, Settings, _finish, decode, describe_invalid, dof_to_joint_angles, leg_cycle, leg_lengths, repeat_cycles,
 )

@@ -84,6 +84,9 @@ def _markdown(rows: list[dict], out: Path) -> str:
            "|---:|---:|---|---|---:|---:|---:|"]
     for r in rows:
         lp = r["limp"]
+        if "error" in lp:
+            md.append(f"| {r['speed']:g} | {r['beta']:g} | limp run impossible: {lp['error']} | | | | {100 * lp['com_tracking_rms_m']:.2f} |")
+            continue
         md.append(f"| {r['speed']:g} | {r['beta']:g} | {lp['normal_stance_right_s']:.3f} / {lp['normal_stance_left_s']:.3f} | "
                   f"{lp['limp_stance_right_s']:.3f} / {lp['limp_stance_left_s']:.3f} | {100 * lp['normal_mean_com_z_m']:+.2f} | "
                   f"{100 * lp['limp_mean_com_z_m']:+.2f} | {100 * lp['com_tracking_rms_m']:.2f} |")

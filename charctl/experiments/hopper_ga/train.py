@@ -21,6 +21,7 @@ def train(cfg, run) -> dict:
     state = GAState.from_checkpoint(run.load_checkpoint(signature)) if run.resumed else None
     start_gen = state.generation if state is not None else 0
     generations = int(cfg.ga.generations)
+    run.writer  # noqa: B018  create the TensorBoard writer (imports torch) before the GA clock starts
     t0 = time.perf_counter()
 
     with make_evaluator(cfg.runtime, s) as evaluate, StopFlag() as stop, TrainingProgress(generations, "hopper-ga", "gen") as bar:

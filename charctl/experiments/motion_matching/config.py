@@ -72,7 +72,7 @@ class RuntimeConfig:
     # true = Holden's variant: the current frame is a candidate too (continue if it is best).
     continue_if_best: bool = False
     end_buffer: int = 20  # paper frames at the end of a non-looping clip that are never searched
-    index: str = "kdtree"  # kdtree (scipy cKDTree) | bbox (bounding boxes) | brute (reference)
+    index: str = "bbox"  # bbox (Holden's bounding boxes, numba) | kdtree (scipy cKDTree) | brute (reference)
     halflife: float = 0.1  # s, inertialization: critically damped decay of the pose offset
     inertialize_root: bool = False  # also blend root velocity / turn rate (paper: raw root deltas)
 
@@ -99,6 +99,10 @@ class SweepConfig:
 
     paths: list[str] = field(default_factory=lambda: ["circle", "square", "star"])
     cases: list[int] = field(default_factory=list)  # empty = all 19
+    # Rollouts per path, started at evenly spaced gait phases of the best-matching clip; errors are
+    # pooled over their frames. One rollout is chaotic (a 2% change of speed moves a case's mean
+    # error by ~0.05 m), so several starts make the ranking of cases meaningful. Paper: silent.
+    starts: int = 4
     plots: bool = True  # PNG of generated vs target paths per case
 
 
@@ -142,6 +146,8 @@ class Config(BaseConfig):
             return "paths.speed and paths.laps must be > 0"
         if min(p.circle_radius, p.square_side, p.star_outer, p.star_inner) <= 0 or p.star_inner >= p.star_outer:
             return "path sizes must be > 0 and paths.star_inner < paths.star_outer"
+        if cfg.sweep.starts < 1:
+            return "sweep.starts must be >= 1"
         if p.star_points < 3:
             return "paths.star_points must be >= 3"
         if d.bvh_forward not in ("auto", "+x", "-x", "+z", "-z"):

@@ -163,14 +163,18 @@ def path_duration(path: TargetPath, speed: float, laps: float) -> float:
     return path.length * (laps if path.closed else 1.0) / speed
 
 
-def path_errors(path: TargetPath, ground: np.ndarray, speed: float, dt: float) -> dict[str, float]:
-    """Mean/std of e_time and e_near (metres) of a generated ground path (T, 2) sampled every dt."""
-    t = np.arange(ground.shape[0]) * dt
-    s = speed * t
+def frame_errors(path: TargetPath, ground: np.ndarray, speed: float, dt: float) -> dict[str, np.ndarray]:
+    """Per-frame e_time and e_near (metres) of a generated ground path (T, 2) sampled every dt."""
+    s = speed * np.arange(ground.shape[0]) * dt
     if not path.closed:
         s = np.minimum(s, path.length)
-    e_time = np.linalg.norm(ground - path.point_at(s), axis=1)
-    e_near = path.nearest_distance(ground)
+    return {"e_time": np.linalg.norm(ground - path.point_at(s), axis=1), "e_near": path.nearest_distance(ground)}
+
+
+def path_errors(path: TargetPath, ground: np.ndarray, speed: float, dt: float) -> dict[str, float]:
+    """Mean/std of e_time and e_near (metres) of a generated ground path (T, 2) sampled every dt."""
+    e = frame_errors(path, ground, speed, dt)
+    e_time, e_near = e["e_time"], e["e_near"]
     return {
         "e_time_mean": float(e_time.mean()), "e_time_std": float(e_time.std()),
         "e_near_mean": float(e_near.mean()), "e_near_std": float(e_near.std()),

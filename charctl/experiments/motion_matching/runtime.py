@@ -110,8 +110,25 @@ def initial_frame(db: Database, traj_query: np.ndarray) -> int:
     return int(db.search_rows[np.argmin(np.einsum("ij,ij->i", d, d))])
 
 
-def run_path(db: Database, index, path: TargetPath, cfg, with_pose: bool = True, seconds: float | None = None) -> Rollout:
-    """Follow `path` with motion matching; `with_pose=False` skips the pose blend (sweep speed)."""
+def shift_start(db: Database, frame: int, shift: float) -> int:
+    """The searchable frame `shift` (fraction) of a cycle after `frame` within the same clip."""
+    if shift == 0.0:
+        return frame
+    rows = db.search_rows[db.clip_id[db.search_rows] == db.clip_id[frame]]
+    k = int(np.searchsorted(rows, frame))
+    return int(rows[(k + int(round(shift * rows.size))) % rows.size])
+
+
+def run_path(
+    db: Database, index, path: TargetPath, cfg, with_pose: bool = True, seconds: float | None = None,
+    start_shift: float = 0.0,
+) -> Rollout:
+    """Follow `path` with motion matching; `with_pose=False` skips the pose blend (sweep speed).
+
+    The first frame is the searchable frame whose trajectory best matches the start of the path;
+    `start_shift` in [0, 1) moves it that fraction of its clip's searchable frames further (another
+    gait phase of the same clip), to average the sweep over starting conditions.
+    """
     import time
 
     rt = cfg.runtime
@@ -130,7 +147,7 @@ def run_path(db: Database, index, path: TargetPath, cfg, with_pose: bool = True,
     ground[0] = path.point_at(0.0)
     heading[0] = np.arctan2(-tangent[1], tangent[0])
     q0 = db.layout.normalise(ctrl.trajectory_raw(0.0, ground[0], heading[0], ground, 0), traj_cols)
-    cur = initial_frame(db, q0)
+    cur = shift_start(db, initial_frame(db, q0), start_shift)
     frames[0] = cur
     blend = PoseBlend(db, cur, rt.halflife, with_pose, rt.inertialize_root)
 
@@ -161,6 +178,13 @@ def run_path(db: Database, index, path: TargetPath, cfg, with_pose: bool = True,
     return out
 
 
+def _smooth_rate(x: np.ndarray, dt: float, half: int = 2) -> np.ndarray:
+    """Derivative of (N, k) samples by differences over +-half frames (clamped at the ends)."""
+    i = np.arange(x.shape[0])
+    hi, lo = np.minimum(i + half, x.shape[0] - 1), np.maximum(i - half, 0)
+    return (x[hi] - x[lo]) / ((hi - lo)[:, None] * dt)
+
+
 class PoseBlend:
     """Inertialized pose output and (optionally) inertialized root motion, segment by segment.
 
@@ -177,6 +201,9 @@ class PoseBlend:
         self.m_off = np.zeros(3)  # root motion offsets (step fwd, step lat, dheading) per frame
         self.m_vel = np.zeros(3)
         self.motion = np.concatenate([db.step_local, db.step_heading[:, None]], axis=1) if root else None
+        # rate of change of the per-frame steps, over +-2 frames (the steps of a resampled clip are piecewise
+        # constant, so a one-frame difference is a train of spikes)
+        self.motion_vel = _smooth_rate(self.motion, 1.0 / db.fps) if root else None
         self.poses: list[np.ndarray] = [db.pose[start:start + 1]]
         self.heights: list[np.ndarray] = [db.height[start:start + 1]]
 
@@ -190,8 +217,8 @@ class PoseBlend:
             # the offset applies to the next step; at a transition it keeps the step that would have come next
             motion = self.motion
             x_src = motion[cur] + self.m_off
-            v_src = (motion[min(cur + 1, db.num_frames - 1)] - motion[cur]) / dt + self.m_vel
-            v_dst = (motion[best + 1] - motion[best]) / dt
+            v_src = self.motion_vel[cur] + self.m_vel
+            v_dst = self.motion_vel[best]
             o, ov = decay_offsets(x_src - motion[best], v_src - v_dst, self.halflife, np.arange(n + 1) * dt)
             blended = motion[src] + o[:n]
             steps, dh = blended[:, :2], blended[:, 2]

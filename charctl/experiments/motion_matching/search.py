@@ -9,8 +9,8 @@ current frame (same clip, phase distance < k; circular for unrolled loops):
           asks for 4x more until one is found (exact: the k nearest overall contain it)
   bbox    Holden's bounding-box scheme compiled with numba: axis-aligned boxes over runs of 16
           and 64 consecutive rows (consecutive frames are close, so the boxes are tight); the
-          large boxes are visited in order of their lower-bound distance, a box is skipped when
-          its bound exceeds the best cost so far, and a frame's sum stops as soon as it does
+          large box with the lowest bound is searched first, then every box (large, then small)
+          whose lower bound is below the best cost so far
 """
 
 from __future__ import annotations
@@ -93,19 +93,22 @@ class KDTreeIndex:
 
 
 class BBoxIndex:
-    """Holden's two-level bounding boxes over consecutive rows, compiled with numba."""
+    """Holden's two-level bounding boxes over consecutive rows (numba-compiled)."""
 
     def __init__(self, feats: np.ndarray, info: RowInfo):
         self.feats = np.ascontiguousarray(feats, dtype=float)
         self.info = info
         self.small_lo, self.small_hi = _boxes(self.feats, SMALL_BOX)
         self.large_lo, self.large_hi = _boxes(self.feats, LARGE_BOX)
+        self.clip = np.ascontiguousarray(info.clip, dtype=np.int64)
+        self.phase = np.ascontiguousarray(info.phase, dtype=float)
+        self.period = np.ascontiguousarray(info.period, dtype=float)
         self.kernel = _bbox_kernel()
 
     def query(self, q: np.ndarray, clip: int = -1, phase: float = 0.0) -> tuple[int, float]:
         i, d = self.kernel(self.feats, np.ascontiguousarray(q, dtype=float), self.small_lo, self.small_hi,
-                           self.large_lo, self.large_hi, self.info.clip, self.info.phase, self.info.period,
-                           int(clip), float(phase), self.info.window)
+                           self.large_lo, self.large_hi, self.clip, self.phase, self.period, int(clip), float(phase),
+                           self.info.window)
         if i < 0:
             raise RuntimeError("every searchable frame is excluded")
         return int(i), float(d)
@@ -123,13 +126,17 @@ def _boxes(feats: np.ndarray, size: int) -> tuple[np.ndarray, np.ndarray]:
 
 def _bbox_kernel():
     """The compiled bounding-box search (numba; compiled once and cached on disk)."""
-    try:
-        from charctl.experiments.motion_matching._bbox_numba import bbox_search
-    except ImportError:  # pragma: no cover - numba is a dependency
-        from charctl.errors import CharctlError
+    from charctl.experiments.motion_matching._bbox_numba import bbox_search
 
-        raise CharctlError("runtime.index=bbox needs numba (pip install numba); use runtime.index=kdtree") from None
     return bbox_search
+
+
+def numba_available() -> bool:
+    try:
+        import numba  # noqa: F401
+    except ImportError:
+        return False
+    return True
 
 
 INDEXES: dict[str, Callable[[np.ndarray, RowInfo], object]] = {
@@ -140,7 +147,15 @@ INDEXES: dict[str, Callable[[np.ndarray, RowInfo], object]] = {
 
 
 def make_index(kind: str, db_or_feats, info: RowInfo | None = None):
-    """An index of `kind` over a database's searchable rows (or raw (M, D) rows plus their RowInfo)."""
+    """An index of `kind` over a database's searchable rows (or raw (M, D) rows plus their RowInfo).
+
+    Without numba, `bbox` falls back to `kdtree` (same answers, slower) with a one-line note.
+    """
+    if kind == "bbox" and not numba_available():
+        import sys
+
+        print("note: runtime.index=bbox needs numba (pip install numba); using the kd-tree", file=sys.stderr)
+        kind = "kdtree"
     if isinstance(db_or_feats, Database):
         return INDEXES[kind](db_or_feats.search_features, row_info(db_or_feats))
     if info is None:

@@ -90,7 +90,7 @@ def best_case_from_sweeps(output_root: str) -> int:
 def run_sweep(cfg, out_dir: Path, progress=None) -> dict:
     """Run the cases of cfg.sweep on its paths; write sweep.json, sweep.md and PNG plots to out_dir."""
     from charctl.experiments.motion_matching.database import build_database
-    from charctl.experiments.motion_matching.paths import make_path, path_errors
+    from charctl.experiments.motion_matching.paths import make_path
     from charctl.experiments.motion_matching.runtime import run_path
     from charctl.experiments.motion_matching.search import make_index
     from charctl.experiments.motion_matching.sources import load_sources
@@ -100,6 +100,7 @@ def run_sweep(cfg, out_dir: Path, progress=None) -> dict:
     if bad:
         raise CharctlError(f"sweep.cases: {bad[0]} is not a Table 1 case (1..19)")
     paths = {p: make_path(p, cfg.paths) for p in cfg.sweep.paths}
+    starts = int(cfg.sweep.starts)
     tic = time.perf_counter()
     sources, info = load_sources(cfg)
     results: dict[int, dict] = {}
@@ -111,23 +112,36 @@ def run_sweep(cfg, out_dir: Path, progress=None) -> dict:
         results[case] = {"description": describe(case), "paths": {}}
         rollouts[case] = {}
         for name, path in paths.items():
-            r = run_path(db, index, path, ccfg, with_pose=False)
-            err = path_errors(path, r.ground, ccfg.paths.speed, 1.0 / db.fps)
-            results[case]["paths"][name] = {**err, "frames": r.num_frames, "searches": r.searches, "jumps": r.jumps}
-            rollouts[case][name] = r.ground
+            runs = [run_path(db, index, path, ccfg, with_pose=False, start_shift=k / starts) for k in range(starts)]
+            err = pooled_errors(path, [r.ground for r in runs], ccfg.paths.speed, 1.0 / db.fps)
+            results[case]["paths"][name] = {**err, "frames": sum(r.num_frames for r in runs),
+                                            "searches": sum(r.searches for r in runs), "jumps": sum(r.jumps for r in runs)}
+            rollouts[case][name] = runs[0].ground
         if progress is not None:
             progress(case)
     elapsed = time.perf_counter() - tic
     summary = summarise(results)
     out_dir.mkdir(parents=True, exist_ok=True)
     payload = {"cases": results, **summary, "seconds": elapsed, "database_frames": int(db.num_searchable),
-               "database_fps": float(db.fps), "paths": list(paths), "speed": float(cfg.paths.speed)}
+               "database_fps": float(db.fps), "paths": list(paths), "speed": float(cfg.paths.speed), "starts": starts}
     payload = json.loads(json.dumps(payload))  # one form (string keys) for the file and the table
     (out_dir / "sweep.json").write_text(json.dumps(payload, indent=2))
     (out_dir / "sweep.md").write_text(sweep_markdown(payload))
     if cfg.sweep.plots:
-        plot_sweep(paths, rollouts, results, summary["best_case"], out_dir)
+        plot_sweep(paths, rollouts, results, summary["best_case"], out_dir, starts)
     return payload
+
+
+def pooled_errors(path, grounds: list[np.ndarray], speed: float, dt: float) -> dict[str, float]:
+    """Mean/std of e_time and e_near over the frames of all rollouts together."""
+    from charctl.experiments.motion_matching.paths import frame_errors
+
+    per = [frame_errors(path, g, speed, dt) for g in grounds]
+    out = {}
+    for k in ("e_time", "e_near"):
+        v = np.concatenate([p[k] for p in per])
+        out[f"{k}_mean"], out[f"{k}_std"] = float(v.mean()), float(v.std())
+    return out
 
 
 def summarise(results: dict[int, dict]) -> dict:
@@ -151,7 +165,8 @@ def sweep_markdown(payload: dict) -> str:
     paths = payload["paths"]
     lines = [
         f"Database: {payload['database_frames']} searchable frames at {payload['database_fps']:.0f} Hz; "
-        f"target speed {payload['speed']:g} m/s; {payload['seconds']:.1f} s for the whole sweep.", "",
+        f"target speed {payload['speed']:g} m/s; each path run from {payload['starts']} starting gait phase(s), "
+        f"mean ± std over all their frames; {payload['seconds']:.1f} s for the whole sweep.", "",
     ]
     titles = {"e_time": "e_time — distance to the target point at the same time (m)",
               "e_near": "e_near — distance to the nearest point of the path (m)"}
@@ -173,7 +188,7 @@ def sweep_markdown(payload: dict) -> str:
     return "\n".join(lines)
 
 
-def plot_sweep(paths: dict, rollouts: dict, results: dict, best: int, out_dir: Path) -> None:
+def plot_sweep(paths: dict, rollouts: dict, results: dict, best: int, out_dir: Path, starts: int = 1) -> None:
     """One PNG per case (generated vs target, one panel per path) and best.png."""
     from charctl.viz.plots import new_figure, save_figure
 
@@ -184,7 +199,8 @@ def plot_sweep(paths: dict, rollouts: dict, results: dict, best: int, out_dir: P
             draw_paths(ax, path, by_path[name])
             r = results[case]["paths"][name]
             ax.set_title(f"{name}: e_time {r['e_time_mean']:.2f}±{r['e_time_std']:.2f} m", fontsize=9)
-        fig.suptitle(f"case {case}: {results[case]['description']}" + (" (best)" if case == best else ""), fontsize=10)
+        note = f" — first of {starts} starts shown, errors pooled over all" if starts > 1 else ""
+        fig.suptitle(f"case {case}: {results[case]['description']}" + (" (best)" if case == best else "") + note, fontsize=10)
         save_figure(fig, out_dir / "plots" / f"case_{case:02d}.png", dpi=90)
         if case == best:
             import shutil

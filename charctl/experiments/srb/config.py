@@ -43,8 +43,8 @@ class TrackingConfig:
     w_linear: float = 1.0  # W entries of the 3 linear COM accelerations (decision, see docs: the text's "1-6" is garbled)
     w_angular: float = 1.0  # W entries of the 3 angular accelerations
     force_reg: float = 1e-6  # weight of ||lambda / m||^2 (m/s^2)^2: keeps the QP strictly convex
-    torque_limit: float = 0.0  # N m per axis of the free body torque tau (0 = contact forces only; decision)
-    torque_reg: float = 1.0  # weight of ||I^-1 tau||^2 (rad/s^2)^2: the body torque costs as much as the tracking error it removes
+    torque_limit: float = 30.0  # N m per axis of the free body torque tau (0 = contact forces only; decision)
+    torque_reg: float = 1e-3  # weight of ||I^-1 tau||^2 (rad/s^2)^2: tau is almost free inside its bound
     solver: str = "daqp"  # daqp (direct C call, hot path) | qpsolvers:daqp | qpsolvers:quadprog
     substeps: int = 1  # QP solves + integration steps per control step (paper: one per frame)
 
@@ -110,7 +110,7 @@ class PushConfig:
     observe: float = 2.0  # s after the push ends the character must stay up
     init_noise: float = 0.05  # SRB trials: std of the initial COM velocity perturbation (m/s and rad/s)
     survive_rate: float = 0.5  # "largest survived force": the largest force whose survival rate is >= this
-    baseline_run: str = ""  # a cgail run directory for the full-body column (same as a second run on the CLI)
+    baseline_run: str = ""  # cgail run directory for the full-body column, or "auto" = the latest AMP walk run under output_root
 
 
 @dataclass

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 import math
+import shutil
 import time
 from pathlib import Path
 
@@ -133,6 +134,8 @@ def evaluate(targets: list[str], options: dict, overrides: list[str]) -> None:
     run = open_run(run_dir, Config, overrides)
     cfg = run.cfg
     baseline = baseline or str(cfg.push.baseline_run or "")
+    if baseline == "auto":
+        baseline = find_baseline_run(Path(str(cfg.output_root)))
     trials = int(options.get("episodes") or cfg.push.trials)
     if trials < 1:
         raise CharctlError("-k/--episodes must be >= 1")
@@ -150,14 +153,35 @@ def evaluate(targets: list[str], options: dict, overrides: list[str]) -> None:
     plot_comparison([srb, full], labels, out_dir / "push.png")
     report = _report(run, cfg, srb, full, md, note, trials)
     (out_dir / "push.md").write_text(md)
+    curve = run.dir / "training_curve.png"
+    if curve.is_file() and out_dir.resolve() != run.dir.resolve():
+        shutil.copyfile(curve, out_dir / "training_curve.png")
     (out_dir / "report.md").write_text(report)
     print(md)
     print(f"wrote {out_dir / 'report.md'}, push.md, push.png, push.json ({time.perf_counter() - t0:.0f} s)")
 
 
+def find_baseline_run(output_root: Path) -> str:
+    """The latest cgail run that is the paper's kind of full-body baseline: AMP mode
+    (cgail.conditional=false), the walk skill only, with a checkpoint; '' if there is none."""
+    from charctl.runs import read_run_config
+
+    for d in sorted((output_root / "cgail").glob("*"), reverse=True):
+        if not (d / "checkpoints" / "last.pt").is_file():
+            continue
+        try:
+            c = read_run_config(d)
+        except CharctlError:
+            continue
+        cg, skills = c.get("cgail") or {}, list(c.get("use_skills") or [])
+        if not cg.get("conditional", True) and skills == ["walk"]:
+            return str(d)
+    return ""
+
+
 def _baseline_table(baseline: str, cases, trials: int, seed: int) -> tuple[PushTable | None, str]:
     if not baseline:
-        return None, "no cgail run given: pass a cgail run directory or push.baseline_run=DIR"
+        return None, "no cgail run given (or none found for push.baseline_run=auto: an AMP walk run, cgail.conditional=false use_skills=[walk])"
     try:
         from charctl.experiments.cgail.push import make_push_simulator
     except ImportError:
@@ -178,7 +202,7 @@ def _report(run, cfg, srb: PushTable, full: PushTable | None, md: str, note: str
                      f"{m.get('rollout_samples_per_s', float('nan')):,.0f} samples/s)\n")
         lines.append(f"- final mean episode length {m.get('episode_length', float('nan')):.1f} steps (limit {cfg.termination.max_steps}), "
                      f"reward per step {m.get('reward_per_step', float('nan')):.2f} (max {cfg.reward.w_stand:g})\n")
-        lines.append("- curves: `training_curve.png` in the run directory\n")
+        lines.append("- curves: `training_curve.png` (episode length and reward per step against samples)\n\n![training](training_curve.png)\n")
     else:
         lines.append("- no metrics.json in the run (training interrupted?)\n")
     lines.append(f"\n## Push study (paper §9, Table 1)\n\nK = {trials} trials per case; directions {list(cfg.push.directions)} deg, "

@@ -4,7 +4,8 @@ Per environment, with contact points p_c (world), COM c, the body's world inerti
 velocity w, the decision variables are the COM acceleration q_dd = (a, w_dot) (world, m/s^2 and
 rad/s^2), the contact-force coefficients lambda >= 0 in a linearised friction-cone basis B
 (4 edges per point: n +- mu t1, n +- mu t2, so f_c = B_c lambda_c with f_n = sum lambda_c) and an
-optional free body torque tau (|tau_i| <= torque_limit; 0 = contact forces only). Newton-Euler:
+optional free body torque tau (|tau_i| <= torque_limit while a foot is on the ground, 0 in flight;
+torque_limit = 0: contact forces only). Newton-Euler:
 
     m a           = sum_c B_c lambda_c + m g
     I w_dot + w x I w = sum_c (p_c - c) x B_c lambda_c + tau
@@ -116,7 +117,8 @@ def reduced_problem(batch: QPBatch, params: QPParams):
     lb = np.zeros((n, N_VARS))
     ub = np.full((n, N_VARS), INF)
     ub[:, :N_LAMBDA] = np.where(np.repeat(batch.active, N_EDGES, axis=1), INF, 0.0)
-    lb[:, tau], ub[:, tau] = -params.torque_limit, params.torque_limit
+    limit = np.where(batch.active.any(axis=1), params.torque_limit, 0.0)[:, None]  # no foot down, no body torque
+    lb[:, tau], ub[:, tau] = -limit, limit
     return h, f, lb, ub, k, k0
 
 
@@ -133,7 +135,10 @@ def _qpsolvers(name: str) -> Callable:
     def solve(h, f, lb, ub):
         import qpsolvers
 
-        x = qpsolvers.solve_qp(h, f, lb=lb, ub=np.where(ub >= INF, np.inf, ub), solver=name)
+        fixed = lb == ub  # swing points / zero torque limit: equality rows (quadprog rejects twin bounds)
+        eq = np.eye(f.size)[fixed] if fixed.any() else None
+        lo, hi = np.where(fixed, -np.inf, lb), np.where(fixed | (ub >= INF), np.inf, ub)
+        x = qpsolvers.solve_qp(h, f, A=eq, b=lb[fixed] if eq is not None else None, lb=lo, ub=hi, solver=name)
         return (x, 1) if x is not None else (np.zeros_like(f), -1)
 
     return solve
@@ -192,7 +197,8 @@ def full_problem(batch: QPBatch, params: QPParams, i: int) -> dict[str, np.ndarr
     ub = np.full(nz, np.inf)
     lb[6:6 + N_LAMBDA] = 0.0
     ub[6:6 + N_LAMBDA] = np.where(np.repeat(batch.active[i], N_EDGES), np.inf, 0.0)
-    lb[6 + N_LAMBDA:], ub[6 + N_LAMBDA:] = -params.torque_limit, params.torque_limit
+    limit = params.torque_limit if batch.active[i].any() else 0.0
+    lb[6 + N_LAMBDA:], ub[6 + N_LAMBDA:] = -limit, limit
     fixed = np.flatnonzero(lb == ub)  # swing points / disabled torque: equality rows, not twin bounds
     a = np.vstack([a, np.eye(nz)[fixed]])
     b = np.concatenate([b, lb[fixed]])

@@ -100,5 +100,6 @@ def render_push_video(run, path: str | Path, seconds: float = 6.0) -> dict:
             _arrow(scene, com - push * FORCE_SCALE, com, (0.9, 0.1, 0.1, 1.0), width=0.04)
 
     info = render_qpos(model, qpos, path, fps=1.0 / float(trace["dt"]), camera="side", annotate=annotate)
-    info["pushes"] = f"{first.force_n:.0f} N to the left for {first.duration_s:g} s at t = {float(trace['start'][0]):.2f} s"
+    start = float(trace["start"][0])
+    info["pushes"] = f"{first.force_n:.0f} N to the left for {first.duration_s:g} s at t = {start:.2f} s" if np.isfinite(start) else "none (video shorter than the push onset)"
     return info
