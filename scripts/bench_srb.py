@@ -85,7 +85,7 @@ def bench_rollout_and_training(cfg, envs: int, steps: int, iterations: int) -> d
     import torch
 
     from charctl.experiments.srb.env import ACT_DIM, OBS_DIM, SRBEnv
-    from charctl.experiments.srb.train import build_agent, collect_rollout
+    from charctl.experiments.srb.trainer import build_agent, collect_rollout
     from charctl.rl.storage import RolloutStorage
 
     torch.set_num_threads(1)

@@ -4,7 +4,6 @@ the split, the COM-path parser, BVH folders, and the pipeline end to end at smok
 from __future__ import annotations
 
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest

@@ -336,7 +336,7 @@ def test_run_push_study_table_and_largest_force():
 
     cfg = make_cfg(**{"push.forces": "[100,200,300,400]", "push.durations": "[0.1,0.4]", "push.directions": "[0,180]", "push.phases": "[0.0,0.5]"})
     cases = make_cases(cfg.push)
-    assert len(cases) == (4 + 2) * 2 * 2
+    assert len(cases) == (1 + 4 + 2) * 2 * 2 and cases[0].kind == "control" and cases[0].force_n == 0.0
     seen = []
 
     def fake(case, seed):  # survives impulses below 50 N s, and 60 N s only forwards
@@ -381,7 +381,8 @@ def test_smoke_train_resume_push_and_video(tmp_path):
     report = (run_dir / "push" / "report.md").read_text()
     assert "Full-body baseline missing" in report and "| 300 N for 0.2 s |" in report
     data = json.loads((run_dir / "push" / "push.json").read_text())
-    assert len(data["srb"]["outcomes"]) == (2 + 2) * 2 and data["full_body"] is None
+    assert len(data["srb"]["outcomes"]) == (1 + 2 + 2) * 2 and data["full_body"] is None
+    assert "| no push | 0 |" in report
     assert (run_dir / "push" / "push.png").stat().st_size > 1000
 
     with pytest.raises(CharctlError) as err:
@@ -406,3 +407,30 @@ def test_bad_config_is_one_line(tmp_path):
     with pytest.raises(CharctlError) as err:
         train_command("srb", ["scale=smoke", "tracking.kpp=3", f"output_root={tmp_path}"])
     assert_one_line(err.value, "tracking.kpp")
+
+
+def test_full_body_baseline_is_found_and_run_through_the_protocol(tmp_path, monkeypatch):
+    import charctl.experiments.cgail.push as cgail_push
+    from charctl.experiments.srb.push import make_cases
+    from charctl.experiments.srb.study import _baseline_label, _baseline_table, find_baseline_run
+
+    def fake_run(name, conditional, skills):
+        d = tmp_path / "repro" / "cgail" / name
+        (d / "checkpoints").mkdir(parents=True)
+        (d / "checkpoints" / "last.pt").write_bytes(b"x")
+        (d / "config.yaml").write_text(f"experiment: cgail\ncgail: {{conditional: {str(conditional).lower()}}}\nuse_skills: {skills}\n")
+        return d
+
+    fake_run("2026-01-01_00-00-00", False, "[walk]")
+    newest_amp = fake_run("2026-01-02_00-00-00", False, "[walk]")
+    fake_run("2026-01-03_00-00-00", True, "[walk]")  # cGAIL, not the baseline
+    fake_run("2026-01-04_00-00-00", False, "[walk, run]")  # AMP but several skills
+    assert find_baseline_run(tmp_path) == str(newest_amp)
+    assert _baseline_label(str(newest_amp)).startswith("full body (AMP walk")
+    calls = []
+    monkeypatch.setattr(cgail_push, "make_push_simulator", lambda run_dir: (lambda case, seed: calls.append((run_dir, seed)) or case.force_n < 250))
+    cases = make_cases(make_cfg(**{"push.forces": "[200,300]", "push.durations": "[0.1]", "push.directions": "[0]", "push.phases": "[0.0]"}).push)
+    table, note = _baseline_table(str(newest_amp), cases, 2, seed=5)
+    assert note == "" and len(calls) == len(cases) * 2 and {s for _, s in calls} == {5, 6}
+    assert table.survival("impulse", 200, 0.2) == 1.0 and table.survival("impulse", 300, 0.2) == 0.0
+    assert _baseline_table("", cases, 2, seed=5)[0] is None

@@ -8,7 +8,7 @@ Light entry points only: torch and the motion code are imported inside the funct
 
 from __future__ import annotations
 
-EVAL_OPTIONS = {"pose_error", "dtw", "out", "episodes"}
+EVAL_OPTIONS = {"pose_error", "dtw", "out"}
 EXPORT_OPTIONS = {"com_path", "crouch_at", "bvh", "video", "seconds"}
 
 

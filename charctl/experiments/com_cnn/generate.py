@@ -11,7 +11,6 @@ generate.max_com_step metres from the previous input, keeping the direction.
 from __future__ import annotations
 
 import csv
-import math
 import time
 from pathlib import Path
 

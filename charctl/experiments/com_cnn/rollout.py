@@ -114,14 +114,14 @@ def fit_nearest_neighbour(train: WindowSet, pca_dims: int, com_weight: float, se
     com = np.concatenate(coms).astype(float)
     com_mean, com_std = com.mean(0), np.maximum(com.std(0), 1e-3)
     rng = np.random.default_rng(seed)
-    fit_idx = np.sort(rng.choice(S, size=min(S, 20000), replace=False))
-    X = ((train.features(fit_idx)[0] - mean) / std).reshape(len(fit_idx), -1)
+    fit_idx = np.sort(rng.choice(S, size=min(S, 8000), replace=False))  # PCA fitted on at most 8000 windows
+    X = ((train.features(fit_idx)[0] - mean) / std).reshape(len(fit_idx), -1).astype(np.float32)
     center = X.mean(0)
     k = int(min(pca_dims, X.shape[0] - 1, X.shape[1]))
     torch.manual_seed(seed)
     _, sv, V = torch.svd_lowrank(torch.as_tensor(X - center), q=k, niter=3)
-    basis = V.numpy()
-    var = float((sv.numpy() ** 2).sum() / max(X.shape[0] - 1, 1))
+    basis = V.double().numpy()
+    var = float((sv.double().numpy() ** 2).sum() / max(X.shape[0] - 1, 1))
     com_scale = float(np.sqrt(var / 3.0) * com_weight)
     nn = NearestNeighbour("nearest neighbour", train.history, train.frame, mean, std, com_mean, com_std, basis, center,
                           com_scale, np.zeros((0, k + 3)), np.concatenate(values).astype(float))

@@ -13,18 +13,18 @@ def schema() -> type:
 
 
 def train(cfg, run) -> dict:
-    from charctl.experiments.srb.train import train as _train
+    from charctl.experiments.srb.trainer import train as _train
 
     return _train(cfg, run)
 
 
 def evaluate(targets, options, overrides) -> None:
-    from charctl.experiments.srb.evaluate import evaluate as _evaluate
+    from charctl.experiments.srb.study import evaluate as _evaluate
 
     _evaluate(targets, options, overrides)
 
 
 def export(target, options, overrides) -> None:
-    from charctl.experiments.srb.evaluate import export as _export
+    from charctl.experiments.srb.study import export as _export
 
     _export(target, options, overrides)

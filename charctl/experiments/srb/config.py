@@ -10,7 +10,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from charctl.config import BaseConfig
-from charctl.rl.ppo import PPOConfig
+from charctl.rl.config import PPOConfig
 
 
 @dataclass

@@ -29,8 +29,9 @@ WALK_CYCLE_S = 38 / 30.00120004800192  # one cycle of the shipped walk clip (38 
 class PushCase:
     """One push condition. Every simulator must apply it exactly like this:
 
-    kind          "impulse" (force sweep at a fixed short duration) or "sustained" (Table 1:
-                  fixed force, duration sweep). A label only; the physics is in the fields below.
+    kind          "impulse" (force sweep at a fixed short duration), "sustained" (Table 1:
+                  fixed force, duration sweep) or "control" (force 0: does the character walk the
+                  whole episode unpushed?). A label only; the physics is in the fields below.
     force_n       magnitude (newtons) of a constant horizontal force applied at the body's centre
                   of mass (SRB: the box's COM; full body: the root/pelvis body, e.g. MuJoCo
                   xfrc_applied on the root) during the push window. No torque is applied.
@@ -88,12 +89,14 @@ class PushCase:
 
 
 def make_cases(push_cfg) -> list[PushCase]:
-    """The impulse sweep (forces x directions x phases at impulse_duration) and Table 1's sustained
-    sweep (sustained_force for each duration x directions x phases)."""
+    """A no-push control (per direction x phase: the same episode with force 0), the impulse sweep
+    (forces x directions x phases at impulse_duration) and Table 1's sustained sweep
+    (sustained_force for each duration x directions x phases)."""
     p = push_cfg
     common = dict(settle_s=float(p.settle), observe_s=float(p.observe))
     grid = [(float(d), float(ph)) for d in p.directions for ph in p.phases]
-    cases = [PushCase("impulse", float(f), float(p.impulse_duration), d, ph, **common) for f in p.forces for d, ph in grid]
+    cases = [PushCase("control", 0.0, float(p.impulse_duration), d, ph, **common) for d, ph in grid]
+    cases += [PushCase("impulse", float(f), float(p.impulse_duration), d, ph, **common) for f in p.forces for d, ph in grid]
     cases += [PushCase("sustained", float(p.sustained_force), float(t), d, ph, **common) for t in p.durations for d, ph in grid]
     return cases
 
@@ -189,14 +192,16 @@ def comparison_markdown(tables: Sequence[PushTable | None], labels: Sequence[str
     ref = present[0]
     head = "| push | impulse (N s) | " + " | ".join(labels) + " |\n|---|---|" + "---|" * len(labels) + "\n"
     lines = []
-    for kind, title in (("impulse", "impulse sweep"), ("sustained", "sustained (Table 1)")):
+    for kind, title in (("control", "no push (control: the same episodes unpushed)"), ("impulse", "impulse sweep"),
+                        ("sustained", "sustained (Table 1)")):
         rows = [r for r in ref.cells() if r["kind"] == kind]
         if not rows:
             continue
         lines.append(f"\n**{title}** — survival rate over directions x phases x trials\n\n" + head)
         for r in rows:
             cells = [f"{t.survival(kind, r['force_n'], r['duration_s']):.2f}" if t is not None else "—" for t in tables]
-            lines.append(f"| {r['force_n']:.0f} N for {r['duration_s']:g} s | {r['impulse_ns']:g} | " + " | ".join(cells) + " |\n")
+            name = "no push" if kind == "control" else f"{r['force_n']:.0f} N for {r['duration_s']:g} s"
+            lines.append(f"| {name} | {r['impulse_ns']:g} | " + " | ".join(cells) + " |\n")
     summary = ["\n**largest survived impulse-sweep force**\n"]
     for t, name in zip(tables, labels):
         if t is None:

@@ -79,8 +79,8 @@ def render_push_video(run, path: str | Path, seconds: float = 6.0) -> dict:
     import mujoco
 
     from charctl.experiments.srb.env import SRBEnv
-    from charctl.experiments.srb.evaluate import _simulate_chunk
-    from charctl.experiments.srb.train import load_policy, policy_actions
+    from charctl.experiments.srb.study import _simulate_chunk
+    from charctl.experiments.srb.trainer import load_policy, policy_actions
     from charctl.viz.video import render_qpos
 
     agent, _ = load_policy(run)

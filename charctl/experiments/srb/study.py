@@ -30,7 +30,7 @@ def srb_push_batch(run, jobs: list[tuple[PushCase, int]], record: bool = False) 
     """Survival of the trained SRB policy for every (case, seed): deterministic policy, episode from
     reference frame 0 with a seed-drawn perturbation of the initial velocities (push.init_noise)."""
     from charctl.experiments.srb.env import SRBEnv
-    from charctl.experiments.srb.train import load_policy, policy_actions
+    from charctl.experiments.srb.trainer import load_policy, policy_actions
 
     agent, _ = load_policy(run)
     cfg = run.cfg
@@ -146,7 +146,7 @@ def evaluate(targets: list[str], options: dict, overrides: list[str]) -> None:
     srb = run_push_study(None, cases, trials, seed=int(cfg.seed), simulate_batch=lambda jobs: srb_push_batch(run, jobs), label="SRB")
     srb.meta = {"run": str(run_dir), "seconds": time.perf_counter() - t0}
     full, note = _baseline_table(baseline, cases, trials, int(cfg.seed))
-    labels = ["SRB (this run)", "full body (cgail AMP walk)"]
+    labels = ["SRB (this run)", _baseline_label(baseline)]
     md = comparison_markdown([srb, full], labels, float(cfg.push.survive_rate), note)
     out_dir.mkdir(parents=True, exist_ok=True)
     save_tables({"srb": srb, "full_body": full}, out_dir / "push.json")
@@ -162,11 +162,12 @@ def evaluate(targets: list[str], options: dict, overrides: list[str]) -> None:
 
 
 def find_baseline_run(output_root: Path) -> str:
-    """The latest cgail run that is the paper's kind of full-body baseline: AMP mode
-    (cgail.conditional=false), the walk skill only, with a checkpoint; '' if there is none."""
+    """The latest cgail run under `output_root` (any depth) that is the paper's kind of full-body
+    baseline: AMP mode (cgail.conditional=false), the walk skill only, with a checkpoint; '' if none."""
     from charctl.runs import read_run_config
 
-    for d in sorted((output_root / "cgail").glob("*"), reverse=True):
+    runs = [p.parent for p in output_root.glob("**/cgail/*/config.yaml")]
+    for d in sorted(runs, key=lambda p: p.name, reverse=True):
         if not (d / "checkpoints" / "last.pt").is_file():
             continue
         try:
@@ -177,6 +178,16 @@ def find_baseline_run(output_root: Path) -> str:
         if not cg.get("conditional", True) and skills == ["walk"]:
             return str(d)
     return ""
+
+
+def _baseline_label(baseline: str) -> str:
+    if not baseline:
+        return "full body (cgail walk)"
+    from charctl.runs import read_run_config
+
+    c = read_run_config(baseline)
+    mode = "cGAIL" if (c.get("cgail") or {}).get("conditional", True) else "AMP"
+    return f"full body ({mode} walk, {Path(baseline).name})"
 
 
 def _baseline_table(baseline: str, cases, trials: int, seed: int) -> tuple[PushTable | None, str]:

@@ -2,8 +2,10 @@
 
 Per iteration: `rollout_steps` control steps of `num_envs` environments (paper §8: m = 1024
 samples per update), one policy forward per step for the whole batch, GAE(0.995, 0.95), then
-PPO epochs over minibatches of 256. Time-limit truncations bootstrap with gamma * V(s_final)
-(folded into the reward, see charctl.rl.storage.compute_gae); terminations do not.
+PPO epochs over minibatches of 256, then the observation normaliser absorbs the rollout (so the
+log-probabilities of acting and of the update use the same statistics). Time-limit truncations
+bootstrap with gamma * V(s_final) (folded into the reward, see charctl.rl.storage.compute_gae);
+terminations do not.
 """
 
 from __future__ import annotations
@@ -90,7 +92,6 @@ def collect_rollout(agent: Agent, env: SRBEnv, storage: RolloutStorage, obs: np.
     storage.clear()
     for _ in range(storage.steps):
         obs_t = torch.as_tensor(obs, dtype=torch.float32)
-        model.obs_norm.update(obs_t)
         action, logp, value = model.act(obs_t)
         obs, reward, terminal, truncated, info = env.step(action.numpy().astype(float))
         reward_t = torch.as_tensor(reward, dtype=torch.float32)
@@ -140,6 +141,7 @@ def train(cfg, run) -> dict:
             obs, stats = collect_rollout(agent, env, storage, obs, gamma)
             t1 = time.perf_counter()
             losses = agent.ppo.update(storage)
+            agent.model.obs_norm.update(storage.obs)  # after the update: acting and PPO saw the same statistics
             t2 = time.perf_counter()
             t_rollout += t1 - t0
             t_update += t2 - t1
@@ -177,17 +179,31 @@ def train(cfg, run) -> dict:
     return metrics
 
 
+def moving_average(x: np.ndarray, window: int) -> np.ndarray:
+    """Trailing mean over `window` points (NaNs ignored), same length as x."""
+    x = np.asarray(x, dtype=float)
+    ok = np.isfinite(x)
+    c = np.concatenate([[0.0], np.cumsum(np.where(ok, x, 0.0))])
+    n = np.concatenate([[0], np.cumsum(ok)])
+    idx = np.arange(1, x.size + 1)
+    lo = np.maximum(idx - window, 0)
+    count = n[idx] - n[lo]
+    return np.where(count > 0, (c[idx] - c[lo]) / np.maximum(count, 1), np.nan)
+
+
 def write_curve(run, history: dict) -> None:
-    """training_curve.png: episode length and reward per step against samples."""
+    """training_curve.png: episode length and reward per step against samples (raw + 25-iteration mean)."""
     if not history["samples"]:
         return
     from charctl.viz.plots import new_figure, save_figure
 
     fig, axes = new_figure(1, 2, figsize=(10, 3.6))
     x = np.array(history["samples"], dtype=float)
-    axes[0].plot(x, history["episode_length"], lw=1.2)
-    axes[0].set_xlabel("samples"), axes[0].set_ylabel("mean episode length (steps)"), axes[0].grid(alpha=0.3)
-    axes[1].plot(x, history["reward"], lw=1.2, color="tab:orange")
-    axes[1].set_xlabel("samples"), axes[1].set_ylabel("reward per step"), axes[1].grid(alpha=0.3)
-    fig.suptitle("srb training")
+    for ax, key, label, color in ((axes[0], "episode_length", "mean episode length (steps)", "tab:blue"),
+                                  (axes[1], "reward", "reward per step", "tab:orange")):
+        y = np.array(history[key], dtype=float)
+        ax.plot(x, y, lw=0.6, alpha=0.35, color=color)
+        ax.plot(x, moving_average(y, 25), lw=1.6, color=color)
+        ax.set_xlabel("samples"), ax.set_ylabel(label), ax.grid(alpha=0.3)
+    fig.suptitle("srb training (thin: per iteration, thick: 25-iteration mean)")
     save_figure(fig, run.path("training_curve.png"))
