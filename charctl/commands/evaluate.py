@@ -30,7 +30,10 @@ def eval_command(targets: list[str], options: dict) -> None:
         else:
             raise CharctlError(f"{t!r} is neither a run directory nor an experiment ({', '.join(sorted(EXPERIMENTS))})")
     if len(experiments) > 1:
-        raise CharctlError(f"evaluate runs of one experiment at a time (got {', '.join(sorted(experiments))})")
+        first = rest[0] if rest[0] in EXPERIMENTS else run_experiment(rest[0])
+        if not (options.get("push") and first == "srb" and experiments == {"srb", "cgail"}):
+            raise CharctlError(f"evaluate runs of one experiment at a time (got {', '.join(sorted(experiments))})")
+        experiments = {first}  # srb's push study takes a cgail run as its full-body baseline
     experiment = experiments.pop()
     if not any(v not in (None, False) for k, v in options.items() if k not in ("episodes", "out")):
         raise CharctlError("say what to evaluate: --dtw, --confusion, --switch A B, --curves, --pose-error, --push or --sweep")

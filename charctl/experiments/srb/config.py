@@ -110,6 +110,7 @@ class PushConfig:
     observe: float = 2.0  # s after the push ends the character must stay up
     init_noise: float = 0.05  # SRB trials: std of the initial COM velocity perturbation (m/s and rad/s)
     survive_rate: float = 0.5  # "largest survived force": the largest force whose survival rate is >= this
+    zero_action_column: bool = True  # also run the protocol with zero actions: what the QP tracker does without the policy
     baseline_run: str = ""  # cgail run directory for the full-body column, or "auto" = the latest AMP walk run under output_root
 
 

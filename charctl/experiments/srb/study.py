@@ -26,20 +26,27 @@ CHUNK = 512  # push episodes stepped together per SRBEnv
 
 
 # ---------------------------------------------------------------------------- the SRB side of the protocol
-def srb_push_batch(run, jobs: list[tuple[PushCase, int]], record: bool = False) -> list[bool] | tuple[list[bool], dict]:
+def zero_actions(model, obs: np.ndarray) -> np.ndarray:
+    """The 'no policy' ablation: feet at the reference placement, no velocity offsets (QP + PD only)."""
+    return np.zeros((obs.shape[0], 10))
+
+
+def srb_push_batch(run, jobs: list[tuple[PushCase, int]], record: bool = False, zero_action: bool = False) -> list[bool] | tuple[list[bool], dict]:
     """Survival of the trained SRB policy for every (case, seed): deterministic policy, episode from
-    reference frame 0 with a seed-drawn perturbation of the initial velocities (push.init_noise)."""
+    reference frame 0 with a seed-drawn perturbation of the initial velocities (push.init_noise).
+    `zero_action` replaces the policy by zero actions (what the QP tracker alone achieves)."""
     from charctl.experiments.srb.env import SRBEnv
     from charctl.experiments.srb.trainer import load_policy, policy_actions
 
     agent, _ = load_policy(run)
+    act = zero_actions if zero_action else policy_actions
     cfg = run.cfg
     results: list[bool] = []
     traces = None
     proto = SRBEnv(cfg, 1, seed=0, auto_reset=False)
     for chunk in iter_chunks(jobs, CHUNK):
         env = SRBEnv(cfg, len(chunk), seed=0, reference=proto.ref, body=proto.body, auto_reset=False, max_steps=10**9)
-        survived, traces = _simulate_chunk(env, agent.model, chunk, float(cfg.push.init_noise), policy_actions, record)
+        survived, traces = _simulate_chunk(env, agent.model, chunk, float(cfg.push.init_noise), act, record)
         results.extend(survived.tolist())
     return (results, traces) if record else results
 
@@ -145,12 +152,20 @@ def evaluate(targets: list[str], options: dict, overrides: list[str]) -> None:
     t0 = time.perf_counter()
     srb = run_push_study(None, cases, trials, seed=int(cfg.seed), simulate_batch=lambda jobs: srb_push_batch(run, jobs), label="SRB")
     srb.meta = {"run": str(run_dir), "seconds": time.perf_counter() - t0}
+    named: dict[str, PushTable | None] = {"srb": srb}
+    labels = ["SRB (trained policy)"]
+    if cfg.push.zero_action_column:
+        named["srb_zero_action"] = run_push_study(None, cases, trials, seed=int(cfg.seed), label="SRB zero action",
+                                                  simulate_batch=lambda jobs: srb_push_batch(run, jobs, zero_action=True))
+        labels.append("SRB, zero action (QP + PD only)")
     full, note = _baseline_table(baseline, cases, trials, int(cfg.seed))
-    labels = ["SRB (this run)", _baseline_label(baseline)]
-    md = comparison_markdown([srb, full], labels, float(cfg.push.survive_rate), note)
+    named["full_body"] = full
+    labels.append(_baseline_label(baseline))
+    tables = list(named.values())
+    md = comparison_markdown(tables, labels, float(cfg.push.survive_rate), note)
     out_dir.mkdir(parents=True, exist_ok=True)
-    save_tables({"srb": srb, "full_body": full}, out_dir / "push.json")
-    plot_comparison([srb, full], labels, out_dir / "push.png")
+    save_tables(named, out_dir / "push.json")
+    plot_comparison(tables, labels, out_dir / "push.png")
     report = _report(run, cfg, srb, full, md, note, trials)
     (out_dir / "push.md").write_text(md)
     curve = run.dir / "training_curve.png"
@@ -212,15 +227,21 @@ def _report(run, cfg, srb: PushTable, full: PushTable | None, md: str, note: str
                      f"({m.get('samples', 0) / max(m.get('wall_time_s', 1e-9), 1e-9):,.0f} samples/s; rollout alone "
                      f"{m.get('rollout_samples_per_s', float('nan')):,.0f} samples/s)\n")
         lines.append(f"- final mean episode length {m.get('episode_length', float('nan')):.1f} steps (limit {cfg.termination.max_steps}), "
-                     f"reward per step {m.get('reward_per_step', float('nan')):.2f} (max {cfg.reward.w_stand:g})\n")
+                     f"reward per step {m.get('reward_per_step_last25', m.get('reward_per_step', float('nan'))):.2f} "
+                     f"(mean of the last 25 iterations where recorded; max {cfg.reward.w_stand:g})\n")
         lines.append("- curves: `training_curve.png` (episode length and reward per step against samples)\n\n![training](training_curve.png)\n")
     else:
         lines.append("- no metrics.json in the run (training interrupted?)\n")
     lines.append(f"\n## Push study (paper §9, Table 1)\n\nK = {trials} trials per case; directions {list(cfg.push.directions)} deg, "
                  f"phases {list(cfg.push.phases)}; 'impulse' = force held {cfg.push.impulse_duration:g} s; settle {cfg.push.settle:g} s, "
                  f"observe {cfg.push.observe:g} s. SRB study took {srb.meta.get('seconds', 0):.0f} s.\n")
+    lines.append("Rows: 'no push' = the same episodes unpushed (a simulator that falls there has no robustness to "
+                 "measure); a cell pools every direction, phase and trial. Columns: the trained SRB policy; the same SRB "
+                 "with zero actions (QP + PD tracker alone, what the policy adds); the full-body baseline.\n")
     if full is None:
         lines.append(f"\n**Full-body baseline missing**: {note}.\n")
+    else:
+        lines.append(f"\nFull-body baseline: `{full.meta.get('run')}` ({full.meta.get('seconds', 0):.0f} s for its trials).\n")
     lines.append(md)
     lines.append("\n![push](push.png)\n")
     return "".join(lines)

@@ -167,6 +167,7 @@ def train(cfg, run) -> dict:
     metrics = {
         "iterations": agent.iteration, "samples": agent.samples, "episode_length": last_len, "episode_return": last_ret,
         "reward_per_step": agent.history["reward"][-1] if agent.history["reward"] else float("nan"),
+        "reward_per_step_last25": float(np.nanmean(agent.history["reward"][-25:])) if agent.history["reward"] else float("nan"),
         "wall_time_s": agent.wall_time, "session_wall_s": elapsed,
         "samples_per_s": new_samples / max(elapsed, 1e-9),
         "rollout_samples_per_s": new_samples / max(t_rollout, 1e-9), "update_s_per_iteration": t_update / max(agent.iteration - (samples_start // per_iter), 1),
