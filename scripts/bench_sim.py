@@ -70,7 +70,7 @@ def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--envs", type=int, default=64)
     ap.add_argument("--seconds", type=float, default=3.0)
-    ap.add_argument("--physics-hz", type=float, default=600.0)
+    ap.add_argument("--physics-hz", type=float, default=300.0)
     ap.add_argument("--control-hz", type=float, default=30.0)
     ap.add_argument("--sweep", action="store_true")
     a = ap.parse_args()

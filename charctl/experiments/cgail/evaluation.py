@@ -169,7 +169,7 @@ def eval_confusion(tr: TrainedRun, episodes: int, out: Path) -> dict:
 
 
 @torch.no_grad()
-def eval_switch(tr: TrainedRun, a: str, b: str, trials: int, out: Path, before_s: float = 2.0, after_s: float = 3.0) -> dict:
+def eval_switch(tr: TrainedRun, a: str, b: str, trials: int, out: Path, before_s: float = 1.0, after_s: float = 2.0) -> dict:
     """Fig 6.10/6.11: command A -> B mid-episode with and without the ramp; latency and falls."""
     if not tr.agent.conditional:
         raise CharctlError(f"{tr.run_dir} is an AMP run: it takes no command, so --switch does not apply")
@@ -208,7 +208,11 @@ def eval_switch(tr: TrainedRun, a: str, b: str, trials: int, out: Path, before_s
             alive &= ~res.terminated
         probs, rs, rc, live = np.array(probs), np.array(rs), np.array(rc), np.array(alive_hist)
         pb = probs[t_switch:, :, kb]
-        latency = [int(np.argmax(pb[:, i] > 0.5)) if (pb[:, i] > 0.5).any() else None for i in range(trials) if alive_at_switch[i]]
+        up = live[t_switch:]  # alive before the step: frames after a fall (and its reset) do not count
+        latency = []
+        for i in np.flatnonzero(alive_at_switch):
+            hit = (pb[:, i] > 0.5) & up[:, i]
+            latency.append(int(np.argmax(hit)) if hit.any() else None)
         lat_ok = [x for x in latency if x is not None]
         falls = int((~alive).sum())
         summary[name] = {"ramp_frames": ramp, "alive_at_switch": int(alive_at_switch.sum()), "latency_frames_mean": float(np.mean(lat_ok)) if lat_ok else None,
