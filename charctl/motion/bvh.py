@@ -211,7 +211,14 @@ def write_bvh(clip: Clip, path: str | Path, fps: float | None = None) -> Path:
     T, B = clip.num_frames, skel.num_bodies
     euler = Rotation.from_quat(clip.local_rot[:, order].reshape(-1, 4)).as_euler("ZYX", degrees=True).reshape(T, B, 3)
     data = np.concatenate([clip.root_pos, euler.reshape(T, -1)], axis=1)
-    lines += ["MOTION", f"Frames: {T}", f"Frame Time: {clip.dt:.8f}"]
+    return write_bvh_file(path, lines, data, clip.dt)
+
+
+def write_bvh_file(path: str | Path, hierarchy: list[str], data: np.ndarray, frame_time: float) -> Path:
+    """Write a BVH file atomically: `hierarchy` lines (from "HIERARCHY" on), then the MOTION section
+    with one row of `data` (T, channels) per frame. Shared by every BVH writer in charctl."""
+    T = data.shape[0]
+    lines = [*hierarchy, "MOTION", f"Frames: {T}", f"Frame Time: {frame_time:.8f}"]
     lines += [" ".join(f"{v:.6f}" for v in row) for row in data]
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)

@@ -13,7 +13,9 @@ from pathlib import Path
 
 import numpy as np
 
+
 from charctl.errors import CharctlError
+from charctl.motion.bvh import write_bvh_file
 from charctl.experiments.hopper_ga.model import (
     Rollout, Settings, _finish, decode, describe_invalid, dof_to_joint_angles, leg_cycle, leg_lengths, repeat_cycles,
 )
@@ -142,14 +144,7 @@ def write_bvh(path: str | Path, s: Settings, l: float, fps: float, root: np.ndar
     T = root.shape[0]
     zyx = np.stack([ang[..., 0], np.zeros_like(ang[..., 0]), ang[..., 1]], -1).reshape(T, -1)
     data = np.concatenate([root, zyx], 1)
-    lines += ["MOTION", f"Frames: {T}", f"Frame Time: {1.0 / fps:.8f}"]
-    lines += [" ".join(f"{v:.6f}" for v in row) for row in data]
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_suffix(path.suffix + ".tmp")
-    tmp.write_text("\n".join(lines) + "\n")
-    tmp.replace(path)
-    return path
+    return write_bvh_file(path, lines, data, 1.0 / fps)
 
 
 # ---------------------------------------------------------------------------- MJCF + video

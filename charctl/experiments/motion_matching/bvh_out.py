@@ -11,9 +11,11 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+
 from scipy.spatial.transform import Rotation
 
 from charctl.errors import CharctlError
+from charctl.motion.bvh import write_bvh_file
 
 
 def write_user_bvh(template, root_pos: np.ndarray, local_rot: np.ndarray, path: str | Path, fps: float) -> Path:
@@ -59,11 +61,4 @@ def write_user_bvh(template, root_pos: np.ndarray, local_rot: np.ndarray, path: 
                 columns.append(euler[:, k])
                 k += 1
     data = np.column_stack(columns) if columns else np.zeros((T, 0))
-    lines += ["MOTION", f"Frames: {T}", f"Frame Time: {1.0 / fps:.8f}"]
-    lines += [" ".join(f"{v:.6f}" for v in row) for row in data]
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_suffix(path.suffix + ".tmp")
-    tmp.write_text("\n".join(lines) + "\n")
-    tmp.replace(path)
-    return path
+    return write_bvh_file(path, lines, data, 1.0 / fps)
