@@ -228,7 +228,12 @@ def update_discriminator(agent: Agent, ro: Rollout, rng: np.random.Generator) ->
             step_stats = {"losses/disc_style": float(l_style), "losses/disc_gp": float(l_gp), "losses/disc_class": float(l_cls),
                           "train/disc_acc_data": float((d_data > 0).float().mean()), "train/disc_acc_policy": float((d_pol < 0).float().mean())}
             if agent.conditional:
-                step_stats["train/class_acc_data"] = float((c_data.argmax(-1) == labels).float().mean())
+                hit = (c_data.argmax(-1) == labels).float()
+                step_stats["train/class_acc_data"] = float(hit.mean())
+                for k, sk in enumerate(agent.skills):
+                    m = labels == k
+                    if m.any():
+                        step_stats[f"class_acc_data/{sk.name}"] = float(hit[m].mean())
         for k, v in step_stats.items():
             stats[k] = stats.get(k, 0.0) + v / cfg.steps_per_iter
     agent.replay.add(fresh_pairs, fresh_cond)
@@ -315,6 +320,6 @@ def train(cfg, run) -> dict:
     metrics = {"iterations": agent.iteration, "samples": agent.samples, "wall_s": round(wall, 1),
                "skills": [s.name for s in agent.skills], "conditional": agent.conditional,
                **{(k.split("/", 1)[1] if k.startswith(("train/", "perf/")) else k.replace("/", "_")): v
-                  for k, v in last.items() if k.startswith(("train/", "perf/", "class_acc_policy/"))}}
+                  for k, v in last.items() if k.startswith(("train/", "perf/", "class_acc_policy/", "class_acc_data/"))}}
     run.write_metrics(metrics)
     return metrics
