@@ -13,6 +13,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import charctl  # noqa: F401  (first: picks MuJoCo's headless GL backend before any test imports mujoco)
+
 import numpy as np
 import pytest
 

@@ -23,6 +23,7 @@ from scipy.spatial.transform import Rotation
 
 from charctl.motion import rotations as R
 from charctl.motion.skeleton import BODY_NAMES, HINGE_JOINTS, Skeleton, load_skeleton
+from charctl.sim.scene import scene_assets, scene_ground
 
 # Intrinsic Euler order of each ball joint's hinge chain (R = R_a1 R_a2 R_a3). Chosen by the
 # largest |middle angle| over all 20 clips and their mirrors (scripts/choose_euler_orders.py):
@@ -141,13 +142,10 @@ def build_mjcf(
     <geom contype="1" conaffinity="0" friction="{friction} 0.005 0.0001" condim="3"/>
   </default>
   <asset>
-    <texture name="grid" type="2d" builtin="checker" rgb1="0.82 0.84 0.86" rgb2="0.68 0.70 0.74" width="512" height="512"/>
-    <material name="grid" texture="grid" texrepeat="{floor_size} {floor_size}" reflectance="0.05"/>
-    <texture name="sky" type="skybox" builtin="gradient" rgb1="0.55 0.7 0.9" rgb2="0.95 0.95 1.0" width="256" height="256"/>
+{scene_assets(floor_size)}
   </asset>
   <worldbody>
-    <light name="sun" pos="2 6 3" dir="-0.3 -1 -0.4" directional="true" castshadow="true"/>
-    <geom name="floor" type="plane" size="{floor_size} {floor_size} 0.1" quat="0.70710678 -0.70710678 0 0" material="grid" contype="0" conaffinity="1"/>
+{scene_ground(floor_size, collides=True)}
 {body}
   </worldbody>
   <actuator>

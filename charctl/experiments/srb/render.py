@@ -12,6 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
+from charctl.sim.scene import scene_assets, scene_ground
 from charctl.experiments.srb.push import PushCase
 
 FORCE_SCALE = 1.0 / 500.0  # m of arrow per newton (a 60 kg body's weight ~ 1.2 m)
@@ -27,13 +28,10 @@ def srb_mjcf(half_extents: np.ndarray, foot_half_length: float) -> str:
     return f"""<mujoco model="srb">
   <visual><global offwidth="1280" offheight="720"/><quality shadowsize="2048"/></visual>
   <asset>
-    <texture name="grid" type="2d" builtin="checker" rgb1="0.82 0.84 0.86" rgb2="0.68 0.70 0.74" width="512" height="512"/>
-    <material name="grid" texture="grid" texrepeat="40 40" reflectance="0.05"/>
-    <texture name="sky" type="skybox" builtin="gradient" rgb1="0.55 0.7 0.9" rgb2="0.95 0.95 1.0" width="256" height="256"/>
+{scene_assets(40)}
   </asset>
   <worldbody>
-    <light name="sun" pos="2 6 3" dir="-0.3 -1 -0.4" directional="true" castshadow="true"/>
-    <geom name="floor" type="plane" size="40 40 0.1" quat="0.70710678 -0.70710678 0 0" material="grid" contype="0" conaffinity="0"/>
+{scene_ground(40, collides=False)}
     <body name="box" pos="0 1 0"><freejoint/>
       <geom type="box" size="{hx:.4f} {hy:.4f} {hz:.4f}" rgba="0.8 0.8 0.78 0.85" contype="0" conaffinity="0"/>
       <camera name="side" mode="trackcom" pos="-2.4 1.0 2.8" xyaxes="0.759 0 0.651 0.164 0.968 -0.191"/>
