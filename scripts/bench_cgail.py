@@ -26,7 +26,7 @@ def main() -> None:
     from charctl.config import compose_config
     from charctl.experiments.cgail.config import Config
     from charctl.experiments.cgail.env import CgailEnv
-    from charctl.experiments.cgail.trainer import build_agent, collect_rollout, discriminator_rewards, total_reward, update_discriminator
+    from charctl.experiments.cgail.train import build_agent, collect_rollout, discriminator_rewards, total_reward, update_discriminator
 
     cfg = compose_config("cgail", [*a.overrides, f"env.num_envs={a.envs}"], Config)
     torch.set_num_threads(int(cfg.train.torch_threads))

@@ -81,7 +81,7 @@ def test_every_eval_mode_writes_its_files(smoke_runs):
 def test_onnx_and_torchscript_match_pytorch(smoke_runs, tmp_path):
     import onnxruntime as ort
 
-    from charctl.experiments.cgail.exporting import ExportedPolicy, _example_inputs, export_onnx, export_torchscript
+    from charctl.experiments.cgail.export import ExportedPolicy, _example_inputs, export_onnx, export_torchscript
     from charctl.experiments.cgail.policy import load_trained_run
 
     cg, _, _ = smoke_runs
@@ -110,7 +110,7 @@ def test_schedule_export_bvh(smoke_runs, tmp_path):
 
 def test_bad_schedule_and_wrong_run_are_one_line_errors(smoke_runs, tmp_path):
     from charctl.errors import CharctlError
-    from charctl.experiments.cgail.exporting import parse_schedule
+    from charctl.experiments.cgail.export import parse_schedule
     from charctl.experiments.cgail.policy import load_trained_run
 
     with pytest.raises(CharctlError, match="unknown skill"):

@@ -13,24 +13,24 @@ def schema() -> type:
 
 
 def train(cfg, run) -> dict:
-    from charctl.experiments.cgail.trainer import train as _train
+    from charctl.experiments.cgail.train import train as _train
 
     return _train(cfg, run)
 
 
 def evaluate(targets, options, overrides) -> None:
-    from charctl.experiments.cgail.evaluation import evaluate as _evaluate
+    from charctl.experiments.cgail.evaluate import evaluate as _evaluate
 
     _evaluate(targets, options, overrides)
 
 
 def export(target, options, overrides) -> None:
-    from charctl.experiments.cgail.exporting import export as _export
+    from charctl.experiments.cgail.export import export as _export
 
     _export(target, options, overrides)
 
 
 def play(run_dir) -> None:
-    from charctl.experiments.cgail.exporting import play as _play
+    from charctl.experiments.cgail.export import play as _play
 
     _play(run_dir)

@@ -49,6 +49,11 @@ class DiscConfig:
     steps_per_iter: int = 10  # discriminator gradient steps per PPO iteration
     replay_size: int = 100_000  # policy-pair replay buffer
     replay_fraction: float = 0.5  # share of the policy half drawn from the replay buffer
+    objective: str = "lsgan"  # lsgan (eqs 4.4/4.7, the paper) | bce (-log(1 - sigmoid D) reward, AMP's GPU peers)
+    logit_reg: float = 0.0  # weight of sum(w^2) of the style head's weights (AMP: 0.01-0.05)
+    weight_decay: float = 0.0  # weight of sum(w^2) of every disc weight (AMP: 1e-4 - 5e-4)
+    class_lr: float = 0.0  # Adam lr of the class head; 0 = the same as `lr`
+    demo_oversample: int = 1  # demonstration pairs at clip times on a 1/(control_hz*k) grid; 1 = frames only
 
 
 @dataclass

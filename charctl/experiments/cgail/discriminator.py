@@ -44,9 +44,25 @@ class Discriminator(nn.Module):
         return d, (self.class_head(h) if self.class_head is not None else None)
 
 
-def style_loss(d_data: torch.Tensor, d_policy: torch.Tensor) -> torch.Tensor:
-    """LSGAN, eq 4.4: data -> +1, policy -> -1."""
-    return ((d_data - 1.0) ** 2).mean() + ((d_policy + 1.0) ** 2).mean()
+def style_loss(d_data: torch.Tensor, d_policy: torch.Tensor, kind: str = "lsgan") -> torch.Tensor:
+    """Style loss. ``lsgan`` (eq 4.4): data -> +1, policy -> -1 (least squares on the raw score).
+    ``bce``: binary cross-entropy on the logit D, data -> 1, policy -> 0 (the loss AMP's GPU
+    re-implementations use)."""
+    if kind == "lsgan":
+        return ((d_data - 1.0) ** 2).mean() + ((d_policy + 1.0) ** 2).mean()
+    if kind == "bce":
+        return F.softplus(-d_data).mean() + F.softplus(d_policy).mean()
+    raise ValueError(f"unknown style loss {kind!r}")
+
+
+def logit_regulariser(disc: "Discriminator") -> torch.Tensor:
+    """Sum of squares of the style head's weights (the 'logit regularisation' of AMP)."""
+    return (disc.style_head.weight**2).sum()
+
+
+def weight_decay_term(disc: "Discriminator") -> torch.Tensor:
+    """Sum of squares of every linear weight of trunk and heads (biases excluded)."""
+    return sum((m.weight**2).sum() for m in disc.modules() if isinstance(m, nn.Linear))
 
 
 def class_loss(logits: torch.Tensor, target: torch.Tensor, kind: str = "ce") -> torch.Tensor:
@@ -66,9 +82,17 @@ def gradient_penalty(disc: Discriminator, pairs_normalized: torch.Tensor, w_gp: 
     return 0.5 * w_gp * (grad**2).sum(-1).mean()
 
 
-def style_reward(d: torch.Tensor) -> torch.Tensor:
-    """r_S = 1 - 1/4 (1 - D)^2, clipped to [0, 1] (eq 4.7)."""
-    return torch.clamp(1.0 - 0.25 * (1.0 - d) ** 2, 0.0, 1.0)
+def style_reward(d: torch.Tensor, kind: str = "lsgan") -> torch.Tensor:
+    """Style reward from the discriminator score.
+
+    ``lsgan`` (eq 4.7): r_S = clip(1 - 1/4 (1 - D)^2, 0, 1), in [0, 1].
+    ``bce``: r_S = -log(max(1 - sigmoid(D), 1e-4)), in [0, 9.2]; paired with the bce loss.
+    """
+    if kind == "lsgan":
+        return torch.clamp(1.0 - 0.25 * (1.0 - d) ** 2, 0.0, 1.0)
+    if kind == "bce":
+        return -torch.log(torch.clamp(1.0 - torch.sigmoid(d), min=1e-4))
+    raise ValueError(f"unknown style reward {kind!r}")
 
 
 def class_reward(probs: torch.Tensor, target: torch.Tensor) -> torch.Tensor:

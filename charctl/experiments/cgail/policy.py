@@ -10,7 +10,7 @@ import torch
 
 from charctl.errors import CharctlError
 from charctl.experiments.cgail.env import CgailEnv
-from charctl.experiments.cgail.trainer import Agent, build_agent, load_agent_state
+from charctl.experiments.cgail.train import Agent, build_agent, load_agent_state
 from charctl.motion import rotations as R
 
 

@@ -26,17 +26,26 @@ class SkillData:
     mean_speed: float  # m/s planar root speed over the clip (target speed of the heading goal)
     local_rot: np.ndarray  # (T, 15, 4) for pose-error evaluation
     fps: float
+    fine_obs: np.ndarray | None = None  # (~T*k, 133) disc observations at k times the control rate
+    oversample: int = 1  # k
 
 
-def load_skills(skills, control_hz: float) -> list[SkillData]:
-    """Load and resample every skill's clip to `control_hz`."""
+def load_skills(skills, control_hz: float, oversample: int = 1) -> list[SkillData]:
+    """Load and resample every skill's clip to `control_hz` (and, with `oversample` k > 1, the
+    discriminator observations also at k * control_hz, for demonstration pairs at in-between times)."""
     out = []
     for s in skills:
         clip = load_clip(s.clip).resample(control_hz)
         qpos, qvel = clip_to_qpos_qvel(clip)
         obs = disc_obs(clip_kinematics(clip))
         planar = np.linalg.norm(np.diff(clip.root_pos[:, [0, 2]], axis=0), axis=1).sum()
-        out.append(SkillData(s.name, s.clip, bool(s.heading_goal), qpos, qvel, obs, clip.loop, float(planar / max(clip.duration, 1e-9)), clip.local_rot, clip.fps))
+        fine = disc_obs(clip_kinematics(load_clip(s.clip).resample(control_hz * oversample))) if oversample > 1 else None
+        out.append(
+            SkillData(
+                s.name, s.clip, bool(s.heading_goal), qpos, qvel, obs, clip.loop,
+                float(planar / max(clip.duration, 1e-9)), clip.local_rot, clip.fps, fine, oversample,
+            )
+        )
     return out
 
 
@@ -47,11 +56,19 @@ def select_skills(cfg):
     return [s for s in cfg.skills if s.name in set(cfg.use_skills)]
 
 
+def _pairs(skill: SkillData) -> np.ndarray:
+    """(o(t), o(t + 1/control_hz)) pairs: at clip frames, or at every fine time when oversampled."""
+    if skill.fine_obs is None:
+        return np.concatenate([skill.obs[:-1], skill.obs[1:]], axis=1).astype(np.float32)
+    k = skill.oversample
+    return np.concatenate([skill.fine_obs[:-k], skill.fine_obs[k:]], axis=1).astype(np.float32)
+
+
 class DemoPairs:
     """All (o_t, o_t+1) pairs of the skill clips; sampling is balanced over skills."""
 
     def __init__(self, skills: list[SkillData]):
-        self.pairs = [np.concatenate([s.obs[:-1], s.obs[1:]], axis=1).astype(np.float32) for s in skills]
+        self.pairs = [_pairs(s) for s in skills]
         self.labels = [np.full(len(p), k, dtype=np.int64) for k, p in enumerate(self.pairs)]
         self.num_skills = len(skills)
 

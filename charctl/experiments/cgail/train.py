@@ -17,7 +17,8 @@ import torch.nn.functional as F
 
 from charctl.errors import CharctlError
 from charctl.experiments.cgail.discriminator import (
-    Discriminator, ReplayBuffer, blended_class_reward, class_loss, gradient_penalty, style_loss, style_reward,
+    Discriminator, ReplayBuffer, blended_class_reward, class_loss, gradient_penalty, logit_regulariser, style_loss,
+    style_reward, weight_decay_term,
 )
 from charctl.experiments.cgail.env import CgailEnv
 from charctl.experiments.cgail.skills import DemoPairs, load_skills, select_skills
@@ -59,7 +60,7 @@ class Agent:
 def build_agent(cfg) -> Agent:
     """Networks, optimisers, demonstration data and replay buffer for `cfg` (seeded)."""
     torch.manual_seed(cfg.seed)
-    skills = load_skills(select_skills(cfg), cfg.env.control_hz)
+    skills = load_skills(select_skills(cfg), cfg.env.control_hz, cfg.disc.demo_oversample)
     K = len(skills)
     conditional = bool(cfg.cgail.conditional)
     from charctl.experiments.cgail.env import GOAL_DIM
@@ -73,9 +74,19 @@ def build_agent(cfg) -> Agent:
     pairs, _ = demos.all()
     with torch.no_grad():
         disc.norm.update(torch.from_numpy(pairs))  # normalise with demonstration statistics (frozen)
-    disc_opt = torch.optim.Adam([p for n, p in disc.named_parameters()], lr=cfg.disc.lr)
+    disc_opt = torch.optim.Adam(discriminator_param_groups(disc, cfg.disc), lr=cfg.disc.lr)
     replay = ReplayBuffer(cfg.disc.replay_size, 2 * DISC_OBS_DIM, K)
     return Agent(cfg, skills, model, ppo, disc, disc_opt, demos, replay, gen)
+
+
+def discriminator_param_groups(disc: Discriminator, dcfg) -> list[dict]:
+    """Adam parameter groups: the class head at `class_lr` (when set), everything else at `lr`."""
+    head = [p for n, p in disc.named_parameters() if n.startswith("class_head.")]
+    rest = [p for n, p in disc.named_parameters() if not n.startswith("class_head.")]
+    groups = [{"params": rest, "lr": dcfg.lr}]
+    if head:
+        groups.append({"params": head, "lr": dcfg.class_lr if dcfg.class_lr > 0 else dcfg.lr})
+    return groups
 
 
 def agent_state(agent: Agent, env: CgailEnv | None = None) -> dict:
@@ -176,7 +187,7 @@ def discriminator_rewards(agent: Agent, ro: Rollout) -> dict[str, torch.Tensor]:
     """r_S, r_C (blended) and class probabilities for every rollout pair, in one forward."""
     T, N = ro.pairs.shape[:2]
     d, logits = agent.disc(ro.pairs.reshape(T * N, -1))
-    out = {"d": d.reshape(T, N), "r_style": style_reward(d).reshape(T, N)}
+    out = {"d": d.reshape(T, N), "r_style": style_reward(d, agent.cfg.disc.objective).reshape(T, N)}
     if logits is not None:
         probs = F.softmax(logits, dim=-1)
         out["probs"] = probs.reshape(T, N, -1)
@@ -213,9 +224,13 @@ def update_discriminator(agent: Agent, ro: Rollout, rng: np.random.Generator) ->
         demo_n = agent.disc.norm(demo)
         d_data, c_data = agent.disc(demo_n, normalized=True)
         d_pol, c_pol = agent.disc(pol)
-        l_style = style_loss(d_data, d_pol)
+        l_style = style_loss(d_data, d_pol, cfg.objective)
         l_gp = gradient_penalty(agent.disc, demo_n, cfg.w_gp)
         loss = l_style + l_gp
+        if cfg.logit_reg > 0:
+            loss = loss + cfg.logit_reg * logit_regulariser(agent.disc)
+        if cfg.weight_decay > 0:
+            loss = loss + cfg.weight_decay * weight_decay_term(agent.disc)
         l_cls = torch.zeros(())
         if agent.conditional:
             kind = agent.cfg.cgail.class_loss

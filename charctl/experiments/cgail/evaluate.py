@@ -76,7 +76,7 @@ def rollout_skill(tr: TrainedRun, skill: int, episodes: int, seconds: float, see
     from charctl.experiments.cgail.discriminator import style_reward
 
     probs = F.softmax(logits, -1).numpy() if logits is not None else None
-    return SkillRollout([np.array(r) for r in rots], probs, style_reward(d).numpy(), falls)
+    return SkillRollout([np.array(r) for r in rots], probs, style_reward(d, tr.agent.cfg.disc.objective).numpy(), falls)
 
 
 def skill_reference(tr: TrainedRun, skill: int, frames: int) -> np.ndarray:
@@ -202,7 +202,7 @@ def eval_switch(tr: TrainedRun, a: str, b: str, trials: int, out: Path, before_s
 
             r_c = blended_class_reward(p, torch.from_numpy(cmd_a), torch.from_numpy(cmd_b), torch.from_numpy(w).float(), len(tr.skill_names))
             probs.append(p.numpy())
-            rs.append(style_reward(d).numpy())
+            rs.append(style_reward(d, tr.agent.cfg.disc.objective).numpy())
             rc.append(r_c.numpy())
             alive_hist.append(alive.copy())
             alive &= ~res.terminated
