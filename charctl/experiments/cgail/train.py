@@ -269,72 +269,113 @@ def class_accuracy_on_policy(agent: Agent, ro: Rollout, probs: torch.Tensor) -> 
     return out
 
 
+# ---------------------------------------------------------------------------- the learner
+class CgailLearner:
+    """One cgail iteration for the shared runner (charctl.rl.runner): rollout, rewards, PPO,
+    discriminator. Counters live on the agent so checkpoints keep their layout."""
+
+    def __init__(self, cfg):
+        torch.set_num_threads(int(cfg.train.torch_threads))
+        self.cfg = cfg
+        self.agent = build_agent(cfg)
+        self.env = CgailEnv(self.agent.skills, cfg.env, seed=cfg.seed, conditional=self.agent.conditional)
+        self.samples_per_iteration = cfg.train.rollout_steps * self.env.N
+        self.episode_lengths: list = []
+        self.rng = np.random.default_rng(cfg.seed + 7919)
+
+    # counters (the runner advances them)
+    @property
+    def iteration(self) -> int:
+        return self.agent.iteration
+
+    @iteration.setter
+    def iteration(self, value: int) -> None:
+        self.agent.iteration = value
+
+    @property
+    def samples(self) -> int:
+        return self.agent.samples
+
+    @samples.setter
+    def samples(self, value: int) -> None:
+        self.agent.samples = value
+
+    def state_dict(self) -> dict:
+        return agent_state(self.agent, self.env)
+
+    def load_state_dict(self, state: dict) -> None:
+        load_agent_state(self.agent, state, self.env)
+        self.rng = np.random.default_rng(self.cfg.seed + 7919 * (self.agent.iteration + 1))
+
+    def signature(self) -> dict:
+        return self.agent.signature()
+
+    def modules(self) -> list[torch.nn.Module]:
+        return [self.agent.model, self.agent.disc]
+
+    def iterate(self) -> dict[str, float]:
+        agent, env, cfg = self.agent, self.env, self.cfg
+        t0 = time.perf_counter()
+        ro = collect_rollout(agent, env, cfg.train.rollout_steps)
+        t1 = time.perf_counter()
+        rew = discriminator_rewards(agent, ro)
+        reward = total_reward(agent, rew, ro.r_goal) + ro.bootstrap
+        ro.storage.rewards = reward
+        with torch.no_grad():
+            blend = torch.as_tensor(env.command_blend(), dtype=torch.float32) if agent.conditional else None
+            last_v = agent.model.value(torch.as_tensor(env.state, dtype=torch.float32), blend)
+        ro.storage.finish(last_v, cfg.ppo.gamma, cfg.ppo.lam)
+        t2 = time.perf_counter()
+        ppo_stats = agent.ppo.update(ro.storage)
+        # normaliser statistics move only after the update, so the PPO ratio starts at exactly 1
+        agent.model.obs_norm.update(ro.storage.obs)
+        t3 = time.perf_counter()
+        disc_stats = update_discriminator(agent, ro, self.rng)
+        t4 = time.perf_counter()
+        agent.unstable_total += ro.unstable
+        self.episode_lengths = (self.episode_lengths + list(ro.episode_lengths))[-200:]
+        n = self.samples_per_iteration
+        mean_len = float(np.mean(self.episode_lengths)) if self.episode_lengths else float(cfg.train.rollout_steps)
+        stats = {
+            **ppo_stats, **disc_stats,
+            "train/r_style": float(rew["r_style"].mean()), "train/r_goal": float(ro.r_goal.mean()),
+            "train/reward": float(reward.mean()), "train/episode_length": mean_len,
+            "train/unstable_resets_total": float(agent.unstable_total), "train/falls": float(ro.falls),
+            "train/unstable_rate": ro.unstable / n,
+            "perf/samples_per_s": n / (t4 - t0), "perf/rollout_samples_per_s": n / (t1 - t0),
+            "perf/frac_rollout": (t1 - t0) / (t4 - t0), "perf/frac_reward": (t2 - t1) / (t4 - t0),
+            "perf/frac_ppo": (t3 - t2) / (t4 - t0), "perf/frac_disc": (t4 - t3) / (t4 - t0),
+        }
+        if agent.conditional:
+            stats["train/r_class"] = float(rew["r_class"].mean())
+            stats.update(class_accuracy_on_policy(agent, ro, rew["probs"]))
+        return stats
+
+    def progress_fields(self, stats: dict[str, float]) -> dict[str, float]:
+        fields = {"r_S": stats["train/r_style"], "ep_len": stats["train/episode_length"]}
+        if self.agent.conditional:
+            fields["acc_pol"] = stats["train/class_acc_policy"]
+        return fields
+
+    def summary(self, stats: dict[str, float]) -> dict:
+        prefixes = ("train/", "perf/", "class_acc_policy/", "class_acc_data/")
+        short = {
+            (k.split("/", 1)[1] if k.startswith(("train/", "perf/")) else k.replace("/", "_")): v
+            for k, v in stats.items()
+            if k.startswith(prefixes) and k != "perf/samples_per_s"
+        }
+        return {"skills": [s.name for s in self.agent.skills], "conditional": self.agent.conditional, **short}
+
+
 # ---------------------------------------------------------------------------- main loop
 def train(cfg, run) -> dict:
-    from charctl.progress import TrainingProgress
-    from charctl.runs import StopFlag
+    """Train cgail (or its AMP baseline) into `run` with the shared on-policy runner."""
+    from charctl.rl.runner import RunnerSettings, run_on_policy
 
-    torch.set_num_threads(int(cfg.train.torch_threads))
-    agent = build_agent(cfg)
-    env = CgailEnv(agent.skills, cfg.env, seed=cfg.seed, conditional=agent.conditional)
-    if run.resumed:
-        load_agent_state(agent, run.load_checkpoint(agent.signature()), env)
-    rng = np.random.default_rng(cfg.seed + 7919 * (agent.iteration + 1))
-    samples_per_iter = cfg.train.rollout_steps * env.N
-    total = int(cfg.train.total_samples)
-    if agent.samples >= total:
-        raise CharctlError(f"{run.dir} already reached train.total_samples={total}; raise it to continue (train.total_samples=...)")
-    last: dict = {}
-    ep_lengths: list = []
-    t_start = time.perf_counter()
-    with StopFlag() as stop, TrainingProgress(total, f"cgail ({'cGAIL' if agent.conditional else 'AMP'}, {agent.num_skills} skills)") as bar:
-        bar.update(agent.samples)
-        while agent.samples < total:
-            t0 = time.perf_counter()
-            ro = collect_rollout(agent, env, cfg.train.rollout_steps)
-            t1 = time.perf_counter()
-            rew = discriminator_rewards(agent, ro)
-            reward = total_reward(agent, rew, ro.r_goal) + ro.bootstrap
-            ro.storage.rewards = reward
-            with torch.no_grad():
-                last_v = agent.model.value(torch.as_tensor(env.state, dtype=torch.float32), torch.as_tensor(env.command_blend(), dtype=torch.float32) if agent.conditional else None)
-            ro.storage.finish(last_v, cfg.ppo.gamma, cfg.ppo.lam)
-            t2 = time.perf_counter()
-            ppo_stats = agent.ppo.update(ro.storage)
-            # normaliser statistics move only after the update, so the PPO ratio starts at exactly 1
-            # (updating before it shifts every input and inflates the clip fraction)
-            agent.model.obs_norm.update(ro.storage.obs)
-            t3 = time.perf_counter()
-            disc_stats = update_discriminator(agent, ro, rng)
-            t4 = time.perf_counter()
-            agent.iteration += 1
-            agent.samples += samples_per_iter
-            agent.unstable_total += ro.unstable
-            ep_lengths = (ep_lengths + list(ro.episode_lengths))[-200:]
-            stats = {**ppo_stats, **disc_stats,
-                     "train/r_style": float(rew["r_style"].mean()), "train/r_goal": float(ro.r_goal.mean()),
-                     "train/reward": float(reward.mean()), "train/episode_length": float(np.mean(ep_lengths)) if ep_lengths else float(cfg.train.rollout_steps),
-                     "train/unstable_resets_total": agent.unstable_total, "train/falls": ro.falls,
-                     "perf/samples_per_s": samples_per_iter / (t4 - t0), "perf/rollout_samples_per_s": samples_per_iter / (t1 - t0),
-                     "perf/frac_rollout": (t1 - t0) / (t4 - t0), "perf/frac_reward": (t2 - t1) / (t4 - t0),
-                     "perf/frac_ppo": (t3 - t2) / (t4 - t0), "perf/frac_disc": (t4 - t3) / (t4 - t0)}
-            if agent.conditional:
-                stats["train/r_class"] = float(rew["r_class"].mean())
-                stats.update(class_accuracy_on_policy(agent, ro, rew["probs"]))
-            if agent.iteration % cfg.train.log_every == 0:
-                run.log_scalars(stats, agent.samples)
-            last = stats
-            bar.update(samples_per_iter, r_S=stats["train/r_style"], **({"acc_pol": stats["train/class_acc_policy"]} if agent.conditional else {}), ep_len=stats["train/episode_length"])
-            if agent.iteration % cfg.train.checkpoint_every == 0:
-                run.save_checkpoint(agent_state(agent, env), agent.signature())
-            if stop.requested:
-                print(f"\ninterrupted: checkpoint written at iteration {agent.iteration}; continue with --resume {run.dir}")
-                break
-    run.save_checkpoint(agent_state(agent, env), agent.signature())
-    wall = time.perf_counter() - t_start
-    metrics = {"iterations": agent.iteration, "samples": agent.samples, "wall_s": round(wall, 1),
-               "skills": [s.name for s in agent.skills], "conditional": agent.conditional,
-               **{(k.split("/", 1)[1] if k.startswith(("train/", "perf/")) else k.replace("/", "_")): v
-                  for k, v in last.items() if k.startswith(("train/", "perf/", "class_acc_policy/", "class_acc_data/"))}}
-    run.write_metrics(metrics)
-    return metrics
+    learner = CgailLearner(cfg)
+    kind = "cGAIL" if learner.agent.conditional else "AMP"
+    settings = RunnerSettings(
+        total_samples=int(cfg.train.total_samples), checkpoint_every=int(cfg.train.checkpoint_every),
+        log_every=int(cfg.train.log_every), description=f"cgail ({kind}, {learner.agent.num_skills} skills)",
+    )
+    return run_on_policy(learner, run, settings)

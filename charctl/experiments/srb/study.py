@@ -223,8 +223,8 @@ def _report(run, cfg, srb: PushTable, full: PushTable | None, md: str, note: str
     m = json.loads(metrics_path.read_text()) if metrics_path.is_file() else {}
     lines = [f"# srb reproduction report\n\nrun: `{run.dir}` (scale={cfg.scale}, seed={cfg.seed})\n\n## Training\n\n"]
     if m:
-        lines.append(f"- samples: {m.get('samples', 0):,} in {m.get('wall_time_s', float('nan')):.0f} s of training "
-                     f"({m.get('samples', 0) / max(m.get('wall_time_s', 1e-9), 1e-9):,.0f} samples/s; rollout alone "
+        lines.append(f"- samples: {m.get('samples', 0):,} in {m.get('wall_s', float('nan')):.0f} s of training "
+                     f"({m.get('samples', 0) / max(m.get('wall_s', 1e-9), 1e-9):,.0f} samples/s; rollout alone "
                      f"{m.get('rollout_samples_per_s', float('nan')):,.0f} samples/s)\n")
         lines.append(f"- final mean episode length {m.get('episode_length', float('nan')):.1f} steps (limit {cfg.termination.max_steps}), "
                      f"reward per step {m.get('reward_per_step_last25', m.get('reward_per_step', float('nan'))):.2f} "

@@ -115,69 +115,111 @@ def collect_rollout(agent: Agent, env: SRBEnv, storage: RolloutStorage, obs: np.
     return obs, stats
 
 
-def train(cfg, run) -> dict:
-    from charctl.progress import TrainingProgress
-    from charctl.runs import StopFlag
+class SrbLearner:
+    """One srb iteration for the shared runner (charctl.rl.runner): SRB + QP rollout, then PPO."""
 
-    torch.set_num_threads(int(cfg.train.torch_threads))
-    agent = build_agent(cfg)
-    if run.resumed:
-        agent.load(run.load_checkpoint(agent.signature(cfg)))
+    def __init__(self, cfg, run):
+        torch.set_num_threads(int(cfg.train.torch_threads))
+        self.cfg, self.run = cfg, run
+        self.agent = build_agent(cfg)
+        tc = cfg.train
+        self.storage = RolloutStorage(int(tc.rollout_steps), int(tc.num_envs), OBS_DIM, ACT_DIM)
+        self.samples_per_iteration = int(tc.num_envs) * int(tc.rollout_steps)
+        self.env: SRBEnv | None = None
+        self.obs: np.ndarray | None = None
+        self.last_len = self.last_ret = float("nan")
+        self.t_rollout = self.t_update = 0.0
+        self.iterations_this_session = 0
+
+    def _ensure_env(self) -> None:
+        """The env is seeded from the iteration count, so it is built after a resume."""
+        if self.env is None:
+            tc = self.cfg.train
+            self.env = SRBEnv(self.cfg, int(tc.num_envs), seed=int(self.cfg.seed) + 1000 * self.agent.iteration)
+            self.obs = self.env.observe()
+
+    @property
+    def iteration(self) -> int:
+        return self.agent.iteration
+
+    @iteration.setter
+    def iteration(self, value: int) -> None:
+        self.agent.iteration = value
+
+    @property
+    def samples(self) -> int:
+        return self.agent.samples
+
+    @samples.setter
+    def samples(self, value: int) -> None:
+        self.agent.samples = value
+
+    def state_dict(self) -> dict:
+        return self.agent.state()
+
+    def load_state_dict(self, state: dict) -> None:
+        self.agent.load(state)
+
+    def signature(self) -> dict:
+        return self.agent.signature(self.cfg)
+
+    def modules(self) -> list[torch.nn.Module]:
+        return [self.agent.model]
+
+    def iterate(self) -> dict[str, float]:
+        self._ensure_env()
+        agent = self.agent
+        t0 = time.perf_counter()
+        self.obs, stats = collect_rollout(agent, self.env, self.storage, self.obs, float(self.cfg.ppo.gamma))
+        t1 = time.perf_counter()
+        losses = agent.ppo.update(self.storage)
+        agent.model.obs_norm.update(self.storage.obs)  # after the update: acting and PPO saw the same statistics
+        t2 = time.perf_counter()
+        self.t_rollout += t1 - t0
+        self.t_update += t2 - t1
+        self.iterations_this_session += 1
+        agent.wall_time += t2 - t0
+        if stats.lengths:
+            self.last_len, self.last_ret = float(np.mean(stats.lengths)), float(np.mean(stats.returns))
+        mean_r = float(np.mean(stats.rewards))
+        h = agent.history
+        for k, v in (("iteration", agent.iteration + 1), ("samples", agent.samples + self.samples_per_iteration),
+                     ("episode_length", self.last_len), ("episode_return", self.last_ret), ("reward", mean_r)):
+            h[k].append(v)
+        # episode statistics are NaN until the first episode ends: logged only once they exist
+        episode = {"rollout/episode_length": self.last_len, "rollout/episode_return": self.last_ret}
+        return {
+            "rollout/reward_per_step": mean_r, **{k: v for k, v in episode.items() if np.isfinite(v)},
+            "rollout/terminated": float(stats.terminated), "rollout/truncated": float(stats.truncated),
+            "perf/samples_per_s": self.samples_per_iteration / max(t2 - t0, 1e-9), **losses,
+        }
+
+    def progress_fields(self, stats: dict[str, float]) -> dict[str, float]:
+        return {"len": self.last_len, "ret": self.last_ret, "r": stats["rollout/reward_per_step"]}
+
+    def summary(self, stats: dict[str, float]) -> dict:
+        h, env = self.agent.history, self.env
+        write_curve(self.run, h)
+        return {
+            "episode_length": self.last_len, "episode_return": self.last_ret,
+            "reward_per_step": h["reward"][-1] if h["reward"] else float("nan"),
+            "reward_per_step_last25": float(np.nanmean(h["reward"][-25:])) if h["reward"] else float("nan"),
+            "train_wall_s": self.agent.wall_time,
+            "rollout_samples_per_s": self.iterations_this_session * self.samples_per_iteration / max(self.t_rollout, 1e-9),
+            "update_s_per_iteration": self.t_update / max(self.iterations_this_session, 1),
+            "qp_solves": env.stats["qp_solves"], "qp_failures": env.stats["qp_failures"],
+            "late_touchdowns": env.stats["late_touchdowns"], "early_touchdowns": env.stats["early_touchdowns"],
+        }
+
+
+def train(cfg, run) -> dict:
+    """Train the srb policy into `run` with the shared on-policy runner."""
+    from charctl.rl.runner import RunnerSettings, run_on_policy
+
     tc = cfg.train
-    env = SRBEnv(cfg, int(tc.num_envs), seed=int(cfg.seed) + 1000 * agent.iteration)
-    storage = RolloutStorage(int(tc.rollout_steps), int(tc.num_envs), OBS_DIM, ACT_DIM)
-    per_iter = int(tc.num_envs) * int(tc.rollout_steps)
-    total = int(tc.total_samples)
-    obs = env.observe()
-    gamma = float(cfg.ppo.gamma)
-    t_rollout = t_update = 0.0
-    samples_start = agent.samples
-    start = time.perf_counter()
-    last_len = last_ret = float("nan")
-    with StopFlag() as stop, TrainingProgress(total, "srb (SRB + QP, PPO)") as bar:
-        bar.update(agent.samples)
-        while agent.samples < total and not stop.requested:
-            t0 = time.perf_counter()
-            obs, stats = collect_rollout(agent, env, storage, obs, gamma)
-            t1 = time.perf_counter()
-            losses = agent.ppo.update(storage)
-            agent.model.obs_norm.update(storage.obs)  # after the update: acting and PPO saw the same statistics
-            t2 = time.perf_counter()
-            t_rollout += t1 - t0
-            t_update += t2 - t1
-            agent.iteration += 1
-            agent.samples += per_iter
-            agent.wall_time += t2 - t0
-            if stats.lengths:
-                last_len, last_ret = float(np.mean(stats.lengths)), float(np.mean(stats.returns))
-            mean_r = float(np.mean(stats.rewards))
-            h = agent.history
-            for k, v in (("iteration", agent.iteration), ("samples", agent.samples), ("episode_length", last_len),
-                         ("episode_return", last_ret), ("reward", mean_r)):
-                h[k].append(v)
-            run.log_scalars({"rollout/reward_per_step": mean_r, "rollout/episode_length": last_len, "rollout/episode_return": last_ret,
-                             "rollout/terminated": stats.terminated, "rollout/truncated": stats.truncated,
-                             "perf/samples_per_s": per_iter / max(t2 - t0, 1e-9), **losses}, agent.samples)
-            bar.update(per_iter, len=last_len, ret=last_ret, r=mean_r)
-            if agent.iteration % int(tc.checkpoint_every) == 0:
-                run.save_checkpoint(agent.state(), agent.signature(cfg))
-    run.save_checkpoint(agent.state(), agent.signature(cfg))
-    elapsed = time.perf_counter() - start
-    new_samples = agent.samples - samples_start
-    metrics = {
-        "iterations": agent.iteration, "samples": agent.samples, "episode_length": last_len, "episode_return": last_ret,
-        "reward_per_step": agent.history["reward"][-1] if agent.history["reward"] else float("nan"),
-        "reward_per_step_last25": float(np.nanmean(agent.history["reward"][-25:])) if agent.history["reward"] else float("nan"),
-        "wall_time_s": agent.wall_time, "session_wall_s": elapsed,
-        "samples_per_s": new_samples / max(elapsed, 1e-9),
-        "rollout_samples_per_s": new_samples / max(t_rollout, 1e-9), "update_s_per_iteration": t_update / max(agent.iteration - (samples_start // per_iter), 1),
-        "qp_solves": env.stats["qp_solves"], "qp_failures": env.stats["qp_failures"],
-        "late_touchdowns": env.stats["late_touchdowns"], "early_touchdowns": env.stats["early_touchdowns"],
-        "stopped_early": bool(stop.requested),
-    }
-    run.write_metrics(metrics)
-    write_curve(run, agent.history)
-    return metrics
+    settings = RunnerSettings(total_samples=int(tc.total_samples), checkpoint_every=int(tc.checkpoint_every),
+                              description="srb (SRB + QP, PPO)")
+    return run_on_policy(SrbLearner(cfg, run), run, settings)
 
 
 def moving_average(x: np.ndarray, window: int) -> np.ndarray:

@@ -1,0 +1,139 @@
+"""The on-policy training loop's plumbing, shared by every PPO experiment (cgail, srb).
+
+An experiment supplies a *learner*: an object that knows how to run one iteration (rollout +
+updates) and how to save and restore itself. The runner owns everything around it, the same
+way for every experiment (the rsl_rl pattern: a runner owns the loop, the algorithm is small):
+
+- resume from the run's last checkpoint (shape-checked by the learner's signature);
+- stop signals: the first Ctrl-C / SIGTERM finishes the iteration, writes the checkpoint and ends
+  the run with `Interrupted` (exit 130 / 143 at the CLI);
+- a progress bar over samples with the learner's chosen live statistics;
+- TensorBoard scalars every `log_every` iterations, periodic and final checkpoints;
+- divergence: a non-finite statistic or parameter stops the run *without* overwriting the last
+  (finite) checkpoint, and raises a one-line error;
+- final metrics with the same keys for every experiment (`iterations`, `samples`, `wall_s`,
+  `samples_per_s`, then the learner's own).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+from typing import Protocol
+
+import torch
+
+from charctl.errors import CharctlError
+
+
+class Learner(Protocol):
+    """What an experiment plugs into `run_on_policy`."""
+
+    iteration: int  # completed iterations
+    samples: int  # environment steps consumed so far
+    samples_per_iteration: int
+
+    def iterate(self) -> dict[str, float]:
+        """One iteration (rollout + updates); returns scalars keyed by their TensorBoard names."""
+
+    def state_dict(self) -> dict:
+        """Everything a checkpoint holds (tensors, numbers, strings, lists, dicts only)."""
+
+    def load_state_dict(self, state: dict) -> None: ...
+
+    def signature(self) -> dict:
+        """Shapes that must match for a checkpoint to load (network widths, skill names ...)."""
+
+    def modules(self) -> list[torch.nn.Module]:
+        """Networks whose parameters must stay finite."""
+
+    def progress_fields(self, stats: dict[str, float]) -> dict[str, float]:
+        """The few statistics shown on the progress bar."""
+
+    def summary(self, stats: dict[str, float]) -> dict:
+        """Experiment-specific final metrics from the last iteration's statistics."""
+
+
+@dataclass(frozen=True)
+class RunnerSettings:
+    """Loop settings (from the experiment's `train` config section)."""
+
+    total_samples: int
+    checkpoint_every: int = 10  # iterations
+    log_every: int = 1  # iterations
+    description: str = "training"
+
+
+def first_non_finite(stats: dict[str, float], modules: list[torch.nn.Module]) -> str | None:
+    """Name of the first non-finite statistic or parameter, or None when everything is finite."""
+    for key, value in stats.items():
+        if isinstance(value, float) and not math.isfinite(value):
+            return f"{key} = {value}"
+    for module in modules:
+        for name, p in module.named_parameters():
+            if not bool(torch.isfinite(p).all()):
+                return f"parameter {type(module).__name__}.{name}"
+    return None
+
+
+def _interrupted(run, iteration: int, signum: int | None) -> Exception:
+    """The exception ending an interrupted run (exit code 130 for SIGINT, 143 for SIGTERM)."""
+    import charctl.errors as errors
+
+    message = f"interrupted at iteration {iteration}: checkpoint written; continue with --resume {run.dir}"
+    cls = getattr(errors, "Interrupted", None)
+    if cls is None:  # pragma: no cover - older errors module
+        return KeyboardInterrupt(message)
+    return cls(message, signum=signum) if "signum" in cls.__init__.__code__.co_varnames else cls(message)
+
+
+def run_on_policy(learner: Learner, run, settings: RunnerSettings) -> dict:
+    """Train `learner` until `settings.total_samples`, writing into `run` (charctl.runs.Run)."""
+    from charctl.progress import TrainingProgress
+    from charctl.runs import StopFlag
+
+    if run.resumed:
+        learner.load_state_dict(run.load_checkpoint(learner.signature()))
+    total = int(settings.total_samples)
+    if learner.samples >= total:
+        raise CharctlError(
+            f"{run.dir} already reached train.total_samples={total}; raise it to continue (train.total_samples=...)"
+        )
+    samples_at_start, stats = learner.samples, {}
+    t_start = time.perf_counter()
+    with StopFlag() as stop, TrainingProgress(total, settings.description) as bar:
+        bar.update(learner.samples)
+        while learner.samples < total:
+            stats = learner.iterate()
+            learner.iteration += 1
+            learner.samples += learner.samples_per_iteration
+            bad = first_non_finite(stats, learner.modules())
+            if bad is not None:
+                run.log_scalars({k: v for k, v in stats.items() if math.isfinite(v)}, learner.samples)
+                run.close()
+                raise CharctlError(
+                    f"training diverged at iteration {learner.iteration} ({bad}); the last finite checkpoint "
+                    f"{run.checkpoint_path} was kept; lower the learning rates and start again"
+                )
+            if learner.iteration % settings.log_every == 0:
+                run.log_scalars(stats, learner.samples)
+            bar.update(learner.samples_per_iteration, **learner.progress_fields(stats))
+            if learner.iteration % settings.checkpoint_every == 0 or stop.requested:
+                run.save_checkpoint(learner.state_dict(), learner.signature())
+            if stop.requested:
+                break
+    if stop.requested:
+        run.close()
+        raise _interrupted(run, learner.iteration, getattr(stop, "signum", None))
+    run.save_checkpoint(learner.state_dict(), learner.signature())
+    wall = time.perf_counter() - t_start
+    metrics = {
+        "iterations": learner.iteration,
+        "samples": learner.samples,
+        "wall_s": round(wall, 1),
+        "samples_per_s": (learner.samples - samples_at_start) / max(wall, 1e-9),
+        **learner.summary(stats),
+    }
+    run.write_metrics(metrics)
+    return metrics
