@@ -37,6 +37,7 @@ class RewardConfig:
     w_style: float = 0.5  # w_S, eq 4.1
     w_class: float = 0.5  # w_C, eq 4.1 (ignored when cgail.conditional=false)
     w_goal: float = 0.0  # w_G, eq 4.1 (0 at small scale; the paper adds it for locomotion tasks)
+    kind: str = "adversarial"  # adversarial (eq 4.1) | tracking (DeepMimic-style baseline: phase in the state)
 
 
 @dataclass
@@ -94,6 +95,10 @@ class Config(BaseConfig):
             return f"use_skills names unknown skill(s) {unknown}; skills are {names}"
         if len(set(names)) != len(names):
             return f"skill names must be unique, got {names}"
+        if cfg.reward.kind not in ("adversarial", "tracking"):
+            return f"reward.kind must be 'adversarial' or 'tracking', got {cfg.reward.kind!r}"
+        if cfg.disc.objective not in ("lsgan", "bce"):
+            return f"disc.objective must be 'lsgan' or 'bce', got {cfg.disc.objective!r}"
         if cfg.cgail.class_loss not in ("ce", "ls"):
             return f"cgail.class_loss must be 'ce' or 'ls', got {cfg.cgail.class_loss!r}"
         ratio = cfg.env.physics_hz / cfg.env.control_hz

@@ -20,6 +20,33 @@ from charctl.motion import rotations as R
 from charctl.sim.batch import BatchedHumanoid, SimSettings
 
 GOAL_DIM = 2
+PHASE_DIM = 2  # (cos, sin) of the clip phase, in the state of the tracking baseline only
+
+# DeepMimic-style tracking reward (reward.kind=tracking), computed on the discriminator
+# observation o (heading frame, so it is invariant to the character's yaw): weights and scales
+# of the pose, velocity, end-effector and root ("COM") terms. See docs/cgail.md, "Tracking baseline".
+TRACK_WEIGHTS = {"pose": 0.65, "vel": 0.1, "ee": 0.15, "root": 0.1}
+TRACK_SCALES = {"pose": 1.0, "vel": 0.1, "ee": 40.0, "root_height": 10.0, "root_vel": 1.0}
+_OBS_ROOT_H, _OBS_ROOT_V, _OBS_ROT, _OBS_VEL, _OBS_EE = (
+    slice(0, 1), slice(1, 4), slice(7, 79), slice(79, 121), slice(121, 133),
+)
+
+
+def tracking_reward(obs: np.ndarray, ref: np.ndarray) -> np.ndarray:
+    """(N,) r in [0, 1] between simulated and reference disc observations (N, 133).
+
+    r = 0.65 exp(-1 sum_j |rot6_j - rot6*_j|^2) + 0.1 exp(-0.1 sum_b |v_b - v*_b|^2)
+      + 0.15 exp(-40 sum_e |p_e - p*_e|^2) + 0.1 exp(-10 (h - h*)^2 - |v_root - v*_root|^2)
+    (joint rotations as the first two rotation-matrix columns; velocities in m/s; positions in m,
+    relative to the root in the heading frame).
+    """
+    def sq(sl: slice) -> np.ndarray:
+        return np.sum((obs[:, sl] - ref[:, sl]) ** 2, axis=1)
+
+    w, k = TRACK_WEIGHTS, TRACK_SCALES
+    root = np.exp(-k["root_height"] * sq(_OBS_ROOT_H) - k["root_vel"] * sq(_OBS_ROOT_V))
+    return (w["pose"] * np.exp(-k["pose"] * sq(_OBS_ROT)) + w["vel"] * np.exp(-k["vel"] * sq(_OBS_VEL))
+            + w["ee"] * np.exp(-k["ee"] * sq(_OBS_EE)) + w["root"] * root)
 
 
 @dataclass
@@ -29,14 +56,17 @@ class StepResult:
     pair_next: np.ndarray  # (N, 133) o_t+1 of the transition just taken (before resets)
     final_state: np.ndarray  # (N, state_dim) s_t+1 before resets (for truncation bootstrapping)
     r_goal: np.ndarray  # (N,)
+    r_track: np.ndarray  # (N,) tracking reward against the reference at the new phase (0 when not tracking)
     terminated: np.ndarray  # (N,) bool: fall or blow-up
     truncated: np.ndarray  # (N,) bool: time limit
     unstable: np.ndarray  # (N,) bool: simulator blow-up this step
 
 
 class CgailEnv:
-    def __init__(self, skills: list[SkillData], env_cfg, seed: int = 0, conditional: bool = True):
+    def __init__(self, skills: list[SkillData], env_cfg, seed: int = 0, conditional: bool = True,
+                 tracking: bool = False):
         self.skills = skills
+        self.tracking = tracking  # phase in the state, reference frame advanced every step
         self.cfg = env_cfg
         self.K = len(skills)
         self.conditional = conditional
@@ -55,7 +85,10 @@ class CgailEnv:
         self.has_goal = np.array([s.heading_goal for s in skills])
         self.speed = np.array([s.mean_speed for s in skills])
         self.rest = np.zeros(self.sim.layout.nu)
-        self.state_dim = STATE_DIM + GOAL_DIM
+        self.ref_frame = np.zeros(self.N, dtype=np.int64)  # reference clip frame at the current phase
+        self.clip_frames = np.array([len(sk.obs) for sk in skills])
+        self.clip_loops = np.array([sk.loop for sk in skills])
+        self.state_dim = STATE_DIM + GOAL_DIM + (PHASE_DIM if tracking else 0)
         self.obs_dim = self.state_dim
         self.episode_return_goal = np.zeros(self.N)
         self.fall_count = 0
@@ -123,6 +156,7 @@ class CgailEnv:
                 frames[:] = min(self.start_frame, len(data.qpos) - 1)
             qpos[m] = data.qpos[frames]
             qvel[m] = data.qvel[frames]
+            self.ref_frame[ids[m]] = frames
         yaw = self.rng.uniform(-np.pi, np.pi, size=len(ids)) if self.random_yaw else np.zeros(len(ids))
         turn = R.heading_quat(yaw)
         qpos[:, [0, 2]] = 0.0
@@ -142,8 +176,29 @@ class CgailEnv:
         g = np.stack([np.cos(rel), np.sin(rel)], axis=1)
         return g * self.has_goal[self.cmd][:, None]
 
+    def _phase_features(self) -> np.ndarray:
+        """(N, 2) cos/sin of the reference clip phase (tracking baseline)."""
+        phase = 2.0 * np.pi * self.ref_frame / np.maximum(self.clip_frames[self.cmd] - 1, 1)
+        return np.stack([np.cos(phase), np.sin(phase)], axis=1)
+
     def _policy_state(self, k) -> np.ndarray:
-        return np.concatenate([policy_state(k), self._goal_features(k)], axis=1)
+        parts = [policy_state(k), self._goal_features(k)]
+        if self.tracking:
+            parts.append(self._phase_features())
+        return np.concatenate(parts, axis=1)
+
+    def _advance_phase(self) -> tuple[np.ndarray, np.ndarray]:
+        """Step every env's reference frame; returns (reference obs at the new frame, clip ended)."""
+        last = self.clip_frames[self.cmd] - 1
+        nxt = self.ref_frame + 1
+        wrapped = np.where(self.clip_loops[self.cmd], nxt % np.maximum(last, 1), np.minimum(nxt, last))
+        ended = ~self.clip_loops[self.cmd] & (nxt >= last)
+        self.ref_frame = wrapped
+        ref = np.empty((self.N, DISC_OBS_DIM))
+        for s in np.unique(self.cmd):  # <= K groups, vectorised inside
+            m = self.cmd == s
+            ref[m] = self.skills[s].obs[self.ref_frame[m]]
+        return ref, ended
 
     @property
     def state(self) -> np.ndarray:
@@ -162,13 +217,18 @@ class CgailEnv:
         targets = self.rest + self.cfg.action_scale * actions
         unstable = self.sim.step(targets, force=force, force_substeps=force_substeps)
         k = sim_kinematics(self.sim)
-        final_state = self._policy_state(k)
+        clip_ended = np.zeros(self.N, dtype=bool)
+        r_track = np.zeros(self.N)
         pair_next = disc_obs(k)
+        if self.tracking:
+            ref, clip_ended = self._advance_phase()
+            r_track = tracking_reward(pair_next, ref)
+        final_state = self._policy_state(k)
         r_goal = self._goal_reward(k)
         fell = self.sim.non_foot_ground_contact(self.cfg.fall_tolerance)
         terminated = fell | unstable
         self.steps += 1
-        truncated = (self.steps >= self.max_steps) & ~terminated
+        truncated = ((self.steps >= self.max_steps) | clip_ended) & ~terminated
         self.fall_count += int(fell.sum())
         done = np.flatnonzero(terminated | truncated)
         state, obs = final_state.copy(), pair_next.copy()
@@ -177,7 +237,7 @@ class CgailEnv:
         if done.size:
             self.reset(done)
         self._maybe_switch(np.setdiff1d(np.arange(self.N), done))
-        return StepResult(self._state, self._obs, pair_next, final_state, r_goal, terminated, truncated, unstable)
+        return StepResult(self._state, self._obs, pair_next, final_state, r_goal, r_track, terminated, truncated, unstable)
 
     def _goal_reward(self, k) -> np.ndarray:
         """r_G in [0, 1]: exp(-sharpness (v* - d . v_xz)^2) for locomotion skills, else 1."""

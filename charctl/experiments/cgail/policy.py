@@ -26,6 +26,8 @@ class TrainedRun:
 
     @property
     def label(self) -> str:
+        if self.cfg.reward.kind == "tracking":
+            return "tracking"
         kind = "cGAIL" if self.agent.conditional else "AMP"
         if self.agent.conditional and self.cfg.cgail.class_loss == "ls":
             kind += "-LS"
@@ -40,7 +42,8 @@ class TrainedRun:
         from omegaconf import OmegaConf
 
         env_cfg = OmegaConf.merge(self.cfg.env, {"num_envs": num_envs, **env_overrides})
-        return CgailEnv(self.agent.skills, env_cfg, seed=seed, conditional=self.agent.conditional)
+        return CgailEnv(self.agent.skills, env_cfg, seed=seed, conditional=self.agent.conditional,
+                        tracking=self.cfg.reward.kind == "tracking")
 
     @torch.no_grad()
     def mean_action(self, env: CgailEnv) -> np.ndarray:

@@ -54,6 +54,7 @@ class Agent:
 
     def signature(self) -> dict:
         return {"skills": ",".join(s.name for s in self.skills), "conditional": self.conditional,
+                "reward": str(self.cfg.reward.kind),
                 "policy_hidden": list(self.cfg.ppo.hidden), "disc_hidden": list(self.cfg.disc.hidden)}
 
 
@@ -63,10 +64,11 @@ def build_agent(cfg) -> Agent:
     skills = load_skills(select_skills(cfg), cfg.env.control_hz, cfg.disc.demo_oversample)
     K = len(skills)
     conditional = bool(cfg.cgail.conditional)
-    from charctl.experiments.cgail.env import GOAL_DIM
+    from charctl.experiments.cgail.env import GOAL_DIM, PHASE_DIM
     from charctl.experiments.cgail.features import DISC_OBS_DIM, STATE_DIM
 
-    model = ActorCritic(STATE_DIM + GOAL_DIM, 28, cfg.ppo, cond_dim=K if conditional else 0)
+    state_dim = STATE_DIM + GOAL_DIM + (PHASE_DIM if cfg.reward.kind == "tracking" else 0)
+    model = ActorCritic(state_dim, 28, cfg.ppo, cond_dim=K if conditional else 0)
     gen = torch.Generator().manual_seed(cfg.seed)
     ppo = PPO(model, cfg.ppo, generator=gen)
     disc = Discriminator(2 * DISC_OBS_DIM, K, list(cfg.disc.hidden), conditional=conditional)
@@ -124,6 +126,7 @@ class Rollout:
     cmd_b: torch.Tensor
     w: torch.Tensor
     r_goal: torch.Tensor  # (T, N)
+    r_track: torch.Tensor  # (T, N) tracking reward (zeros unless reward.kind=tracking)
     bootstrap: torch.Tensor  # (T, N) gamma * V(s_final) on truncation
     episode_lengths: list
     unstable: int
@@ -154,6 +157,7 @@ def _collect_rollout(agent: Agent, env: CgailEnv, steps: int, deterministic: boo
     cmd_b = torch.zeros(steps, N, dtype=torch.long)
     w = torch.zeros(steps, N)
     r_goal = torch.zeros(steps, N)
+    r_track = torch.zeros(steps, N)
     bootstrap = torch.zeros(steps, N)
     lengths = []
     unstable = falls = 0
@@ -168,6 +172,7 @@ def _collect_rollout(agent: Agent, env: CgailEnv, steps: int, deterministic: boo
         res = env.step(action.numpy().astype(np.float64))
         pairs[t] = torch.from_numpy(np.concatenate([o_t, res.pair_next], axis=1))
         r_goal[t] = torch.from_numpy(res.r_goal)
+        r_track[t] = torch.from_numpy(res.r_track)
         done = res.terminated | res.truncated
         if res.truncated.any():
             idx = np.flatnonzero(res.truncated)
@@ -179,7 +184,7 @@ def _collect_rollout(agent: Agent, env: CgailEnv, steps: int, deterministic: boo
         lengths += list(steps_before[done] + 1)
         unstable += int(res.unstable.sum())
         falls += int((res.terminated & ~res.unstable).sum())
-    return Rollout(storage, pairs, cond_all, cmd_a, cmd_b, w, r_goal, bootstrap, lengths, unstable, falls)
+    return Rollout(storage, pairs, cond_all, cmd_a, cmd_b, w, r_goal, r_track, bootstrap, lengths, unstable, falls)
 
 
 @torch.no_grad()
@@ -195,9 +200,12 @@ def discriminator_rewards(agent: Agent, ro: Rollout) -> dict[str, torch.Tensor]:
     return out
 
 
-def total_reward(agent: Agent, rewards: dict, r_goal: torch.Tensor) -> torch.Tensor:
-    """r = w_S r_S + w_C r_C + w_G r_G (eq 4.1); AMP baseline: no r_C."""
+def total_reward(agent: Agent, rewards: dict, r_goal: torch.Tensor, r_track: torch.Tensor | None = None) -> torch.Tensor:
+    """r = w_S r_S + w_C r_C + w_G r_G (eq 4.1); AMP baseline: no r_C; tracking baseline:
+    r = r_track + w_G r_G (the discriminator still trains, as a style diagnostic only)."""
     rc = agent.cfg.reward
+    if rc.kind == "tracking":
+        return r_track + rc.w_goal * r_goal
     r = rc.w_style * rewards["r_style"] + rc.w_goal * r_goal
     if agent.conditional:
         r = r + rc.w_class * rewards["r_class"]
@@ -278,7 +286,8 @@ class CgailLearner:
         torch.set_num_threads(int(cfg.train.torch_threads))
         self.cfg = cfg
         self.agent = build_agent(cfg)
-        self.env = CgailEnv(self.agent.skills, cfg.env, seed=cfg.seed, conditional=self.agent.conditional)
+        self.env = CgailEnv(self.agent.skills, cfg.env, seed=cfg.seed, conditional=self.agent.conditional,
+                            tracking=cfg.reward.kind == "tracking")
         self.samples_per_iteration = cfg.train.rollout_steps * self.env.N
         self.episode_lengths: list = []
         self.rng = np.random.default_rng(cfg.seed + 7919)
@@ -319,7 +328,7 @@ class CgailLearner:
         ro = collect_rollout(agent, env, cfg.train.rollout_steps)
         t1 = time.perf_counter()
         rew = discriminator_rewards(agent, ro)
-        reward = total_reward(agent, rew, ro.r_goal) + ro.bootstrap
+        reward = total_reward(agent, rew, ro.r_goal, ro.r_track) + ro.bootstrap
         ro.storage.rewards = reward
         with torch.no_grad():
             blend = torch.as_tensor(env.command_blend(), dtype=torch.float32) if agent.conditional else None
@@ -339,6 +348,7 @@ class CgailLearner:
         stats = {
             **ppo_stats, **disc_stats,
             "train/r_style": float(rew["r_style"].mean()), "train/r_goal": float(ro.r_goal.mean()),
+            "train/r_track": float(ro.r_track.mean()),
             "train/reward": float(reward.mean()), "train/episode_length": mean_len,
             "train/unstable_resets_total": float(agent.unstable_total), "train/falls": float(ro.falls),
             "train/unstable_rate": ro.unstable / n,
