@@ -13,7 +13,7 @@ export MUJOCO_GL ?= osmesa
 export PYOPENGL_PLATFORM ?= osmesa
 
 .DEFAULT_GOAL := help
-.PHONY: help install render-deps test test-fast test-slow demo bench clean-outputs
+.PHONY: help install render-deps test test-fast test-slow lint demo bench clean-outputs
 
 help: ## show this help
 	@grep -hE '^[a-zA-Z0-9_-]+:.*## ' $(MAKEFILE_LIST) | awk 'BEGIN {FS = ":.*## "}; {printf "  \033[36m%-24s\033[0m %s\n", $$1, $$2}'
@@ -40,6 +40,10 @@ test: install ## install, then run the whole test suite (< 10 min on 2 cores)
 
 test-slow: install ## the slow learning checks (minutes each)
 	$(PY) -m pytest -q -m slow
+
+lint: install ## ruff: lint rules and formatting (config in pyproject.toml)
+	$(VENV)/bin/ruff check .
+	$(VENV)/bin/ruff format --check .
 
 demo: install ## install, then the main job at a small default scale: clips, BVH/mp4 export, a short cgail training + evaluation
 	$(CHARCTL) data list

@@ -8,15 +8,17 @@ from __future__ import annotations
 
 import sys
 from pathlib import Path
-from typing import List, Optional, Tuple
+from typing import List, Optional
 
 import typer
 
+from charctl.commands.dispatch import EvalGroup, ExportGroup, clip_export
 from charctl.errors import CharctlError
+from charctl.experiments import EXPERIMENTS
 
 app = typer.Typer(
     name="charctl",
-    help="Train and evaluate character-animation research systems: cgail, srb, com-cnn, motion-matching, hopper-ga.",
+    help=f"Train and evaluate character-animation research systems: {', '.join(EXPERIMENTS)}.",
     no_args_is_help=True,
     add_completion=False,
     pretty_exceptions_enable=False,
@@ -48,70 +50,64 @@ def data_show(clip: str = typer.Argument(..., help="clip name (see `charctl data
 # ---------------------------------------------------------------------------- train
 @app.command()
 def train(
-    experiment: str = typer.Argument(..., help="cgail | srb | com-cnn | motion-matching | hopper-ga"),
+    experiment: str = typer.Argument(..., help=" | ".join(EXPERIMENTS)),
     overrides: Optional[List[str]] = OverridesArg,
     resume: Optional[Path] = typer.Option(None, "--resume", help="continue this run directory from its last checkpoint"),
     multirun: bool = typer.Option(False, "-m", "--multirun", help="sweep: a=1,2 b=x,y runs every combination in turn"),
 ) -> None:
-    """Train an experiment: `charctl train cgail scale=smoke ppo.lr=1e-4`."""
+    """Train an experiment: `charctl train EXPERIMENT scale=smoke ppo.lr=1e-4`."""
     from charctl.commands.train import train_command
 
     train_command(experiment, list(overrides or []), resume=resume, multirun=multirun)
 
 
-# ---------------------------------------------------------------------------- eval
-@app.command("eval")
-def evaluate(
-    targets: Optional[List[str]] = typer.Argument(None, help="run directories, an experiment name, and/or key=value overrides", show_default=False),
-    dtw: bool = typer.Option(False, "--dtw", help="DTW pose error against the reference clips (Table 6.1)"),
-    confusion: bool = typer.Option(False, "--confusion", help="classifier confusion matrix (Fig 6.8)"),
-    switch: Optional[Tuple[str, str]] = typer.Option(None, "--switch", help="command switch study A -> B (Fig 6.10/6.11)", show_default=False),
-    curves: bool = typer.Option(False, "--curves", help="training-curve figures from TensorBoard logs"),
-    pose_error: bool = typer.Option(False, "--pose-error", help="com-cnn: teacher-forced and autoregressive joint-angle error"),
-    push: bool = typer.Option(False, "--push", help="srb: push-robustness study"),
-    sweep: bool = typer.Option(False, "--sweep", help="motion-matching: the Table 1 feature sweep"),
-    episodes: Optional[int] = typer.Option(None, "--episodes", "-k", help="episodes/trials per case"),
-    out: Optional[Path] = typer.Option(None, "--out", "-o", help="folder for tables and figures (default: inside the run)"),
-) -> None:
-    """Evaluate runs. No run directory = the latest cgail run in outputs/."""
-    from charctl.commands.evaluate import eval_command
+# ---------------------------------------------------------------------------- eval / export
+# The first argument (an experiment name or a run directory) selects the experiment; the options are
+# the ones that experiment declares (charctl.experiments), so `charctl eval NAME --help` lists only those.
+eval_app = typer.Typer(
+    cls=EvalGroup,
+    help="Evaluate runs: `charctl eval EXPERIMENT|RUN_DIR ...` then more run directories, the experiment's "
+    "options and key=value overrides; `charctl eval EXPERIMENT --help` lists that experiment's options.",
+    no_args_is_help=True,
+    subcommand_metavar="EXPERIMENT|RUN_DIR [ARGS]...",
+)
+app.add_typer(eval_app, name="eval")
 
-    options = {"dtw": dtw, "confusion": confusion, "switch": switch, "curves": curves, "pose_error": pose_error,
-               "push": push, "sweep": sweep, "episodes": episodes, "out": out}
-    eval_command(list(targets or []), options)
+export_app = typer.Typer(
+    cls=ExportGroup,
+    help="Export clips (`export bvh walk -o walk.bvh`) or trained runs (`export EXPERIMENT|RUN_DIR ...`); "
+    "`charctl export EXPERIMENT --help` lists that experiment's options.",
+    no_args_is_help=True,
+    subcommand_metavar="bvh|video|EXPERIMENT|RUN_DIR [ARGS]...",
+)
+app.add_typer(export_app, name="export")
+
+ClipArg = typer.Argument(
+    None, help="clip name (see `charctl data list`), file path, optional ':mirror'", show_default=False
+)
+OutputOpt = typer.Option(None, "-o", "--output", help="output file", show_default=False)
+FpsOpt = typer.Option(None, "--fps", help="resample to this frame rate", show_default=False)
 
 
-# ---------------------------------------------------------------------------- export
-@app.command()
-def export(
-    target: str = typer.Argument(..., help="'bvh' or 'video' (a clip), or a run directory / experiment name"),
-    args: Optional[List[str]] = typer.Argument(None, help="the clip (for bvh/video), then key=value overrides", show_default=False),
-    output: Optional[Path] = typer.Option(None, "-o", "--output", help="output file (clip export)"),
-    fps: Optional[float] = typer.Option(None, "--fps", help="resample to this frame rate"),
-    bvh: Optional[Path] = typer.Option(None, "--bvh", help="write a BVH of the policy/generated motion"),
-    video: Optional[Path] = typer.Option(None, "--video", help="write an mp4 of the policy/generated motion"),
-    onnx: Optional[Path] = typer.Option(None, "--onnx", help="export the policy (normaliser built in) as ONNX"),
-    torchscript: Optional[Path] = typer.Option(None, "--torchscript", help="export the policy as TorchScript"),
-    commands: Optional[str] = typer.Option(None, "--commands", help='command schedule, e.g. "walk:0,run:3,kick:6" (seconds)'),
-    com_path: Optional[str] = typer.Option(None, "--com-path", help="com-cnn: CSV file or circle:r=2,speed=1.2"),
-    crouch_at: Optional[float] = typer.Option(None, "--crouch-at", help="com-cnn: lower the COM from this time (s)"),
-    seconds: Optional[float] = typer.Option(None, "--seconds", help="length of a generated rollout"),
-) -> None:
-    """Export clips (`export bvh walk -o walk.bvh`) or trained runs (`export RUN --onnx policy.onnx`)."""
-    from charctl.commands.export import export_command
+@export_app.command("bvh")
+def export_bvh(clip: str | None = ClipArg, output: Path | None = OutputOpt, fps: float | None = FpsOpt) -> None:
+    """A clip as BVH: `charctl export bvh walk -o walk.bvh [--fps 60]`."""
+    clip_export("bvh", clip, output, fps)
 
-    options = {"output": output, "fps": fps, "bvh": bvh, "video": video, "onnx": onnx, "torchscript": torchscript,
-               "commands": commands, "com_path": com_path, "crouch_at": crouch_at, "seconds": seconds}
-    export_command(target, list(args or []), options)
+
+@export_app.command("video")
+def export_video(clip: str | None = ClipArg, output: Path | None = OutputOpt, fps: float | None = FpsOpt) -> None:
+    """A clip rendered to mp4: `charctl export video walk -o walk.mp4`."""
+    clip_export("video", clip, output, fps)
 
 
 # ---------------------------------------------------------------------------- play / config
 @app.command()
-def play(run_dir: Optional[Path] = typer.Argument(None, help="cgail run directory (default: latest)")) -> None:
-    """Interactive command switching in a MuJoCo viewer (needs a display)."""
+def play(target: str = typer.Argument(..., help="run directory, or an experiment name for its latest run")) -> None:
+    """Interactive viewer of a trained policy (needs a display), where the experiment has one."""
     from charctl.commands.export import play_command
 
-    play_command(run_dir)
+    play_command(target)
 
 
 @app.command("config")
@@ -125,31 +121,80 @@ def show_config(
     print_config(experiment, list(overrides or []))
 
 
+_TERMINATED = []  # set by the SIGTERM handler: a KeyboardInterrupt that was really a SIGTERM
+
+
+def _on_sigterm(signum, frame) -> None:  # noqa: ARG001
+    _TERMINATED.append(signum)
+    raise KeyboardInterrupt
+
+
+def _os_error_line(exc: OSError) -> str:
+    cause = exc.strerror or str(exc) or type(exc).__name__
+    paths = [str(p) for p in (exc.filename, getattr(exc, "filename2", None)) if p]
+    return f"{' -> '.join(paths)}: {cause}" if paths else cause
+
+
 def main() -> None:
-    """Console entry point: CharctlError -> one line on stderr, exit code 2; never a traceback."""
+    """Console entry point: every failure is one line on stderr and an exit status, never a traceback.
+
+    CharctlError -> "error: ..." and exit 2 (Diverged: 3); Interrupted (Ctrl-C / SIGTERM after the
+    checkpoint was written) -> its "interrupted at ..." line and exit 130 / 143; Ctrl-C or SIGTERM
+    outside a training loop -> 130 / 143; an OSError -> "error: PATH: cause", exit 2; click usage
+    errors -> their code; `typer.Exit(code)` -> code.
+    """
+    import signal
+
+    from charctl.errors import Interrupted
+
     try:
-        app(standalone_mode=False)
+        old_term = signal.signal(signal.SIGTERM, _on_sigterm)
+    except ValueError:  # not the main thread (tests calling main() from a worker)
+        old_term = None
+    try:
+        rc = app(standalone_mode=False)
+    except Interrupted as exc:
+        for sig in (signal.SIGINT, signal.SIGTERM):  # a further Ctrl-C must not change the exit code
+            signal.signal(sig, signal.SIG_IGN)
+        print(str(exc), file=sys.stderr)
+        sys.exit(exc.exit_code)
     except CharctlError as exc:
         print(f"error: {exc}", file=sys.stderr)
-        sys.exit(2)
+        sys.exit(exc.exit_code)
     except KeyboardInterrupt:
-        print("interrupted", file=sys.stderr)
-        sys.exit(130)
+        _exit_interrupted()
     except SystemExit:
         raise
+    except OSError as exc:  # a path that cannot be read or written, a full disk ...
+        print(f"error: {_os_error_line(exc)}", file=sys.stderr)
+        sys.exit(2)
     except Exception as exc:  # click usage errors and friends (typer >= 0.16 vendors click as typer._click)
         name = type(exc).__name__
         if name == "NoArgsIsHelpError":  # bare `charctl` / `charctl data`: show the help
             ctx = getattr(exc, "ctx", None)
             print(ctx.get_help() if ctx is not None else exc)
             sys.exit(0)
-        if name == "Abort":
-            print("aborted", file=sys.stderr)
-            sys.exit(130)
+        if name == "Abort":  # click's form of a KeyboardInterrupt
+            _exit_interrupted()
         if hasattr(exc, "format_message") and hasattr(exc, "exit_code"):  # click.ClickException or typer's copy
             print(f"error: {exc.format_message()}", file=sys.stderr)
             sys.exit(exc.exit_code)
         raise
+    finally:
+        if old_term is not None and signal.getsignal(signal.SIGTERM) is _on_sigterm:
+            signal.signal(signal.SIGTERM, old_term)  # in-process callers (tests) get their handler back
+    # standalone_mode=False makes click *return* the code of typer.Exit / click.exceptions.Exit
+    sys.exit(rc if isinstance(rc, int) and not isinstance(rc, bool) else 0)
+
+
+def _exit_interrupted() -> None:
+    import signal
+
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, signal.SIG_IGN)
+    terminated = bool(_TERMINATED)
+    print("terminated" if terminated else "interrupted", file=sys.stderr)
+    sys.exit(128 + int(signal.SIGTERM if terminated else signal.SIGINT))
 
 
 if __name__ == "__main__":

@@ -15,7 +15,9 @@ from __future__ import annotations
 
 import dataclasses
 import itertools
+import math
 import os
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -29,9 +31,9 @@ class BaseConfig:
 
     experiment: str = "???"
     scale: str = "small"  # smoke | small | paper
-    seed: int = 0
+    seed: int = 0  # every RNG (numpy, torch, env resets) derives from this
     output_root: str = "outputs"  # run directories go to <output_root>/<experiment>/<timestamp>/
-    device: str = "auto"  # auto | cpu | cuda
+    device: str = "auto"  # auto | cpu | cuda (auto: cuda when available)
     notes: str = ""  # free text stored with the run
 
 
@@ -84,6 +86,9 @@ def compose_config(experiment: str, overrides: list[str] | None = None, schema: 
         raise CharctlError(f"bad override for {experiment} ({_first_line(exc)}); overrides: {' '.join(overrides)}") from None
     if schema is not None:
         cfg = validate(cfg, schema, experiment)
+        problem = check_device_available(str(cfg.get("device", "auto")))
+        if problem:
+            raise CharctlError(problem)
     return cfg
 
 
@@ -104,6 +109,9 @@ def validate(cfg, schema: type, experiment: str):
     except OmegaConfBaseException as exc:
         raise CharctlError(f"invalid config for {experiment}: {_first_line(exc)}") from None
     OmegaConf.set_struct(merged, True)
+    problem = check_ranges(merged, schema) or check_device_name(merged.get("device", "auto"), schema, experiment)
+    if problem:
+        raise CharctlError(f"invalid config for {experiment}: {problem}")
     check = getattr(schema, "check", None)
     if callable(check):
         problem = check(merged)
@@ -136,6 +144,155 @@ def to_yaml(cfg) -> str:
     from omegaconf import OmegaConf
 
     return OmegaConf.to_yaml(cfg, resolve=True)
+
+
+# ---------------------------------------------------------------------------- value ranges
+# Declared once for every experiment: a numeric config field is checked by its own metadata
+# (`field(default=..., metadata={"ge": 0, "le": 1})`, keys ge / gt / le / lt) or, without it, by
+# the rule for its name below. Every float must also be finite (no nan / inf), and list fields named
+# in LIST_RULES are checked element by element. All of this runs before any file is written.
+_COUNT = {"ge": 1}
+_NON_NEGATIVE = {"ge": 0}
+_POSITIVE = {"gt": 0}
+_FRACTION = {"ge": 0, "le": 1}
+RANGE_RULES: dict[str, dict] = {
+    **dict.fromkeys([
+        "num_envs", "rollout_steps", "total_samples", "steps", "batch_size", "minibatch_size", "epochs",
+        "checkpoint_every", "log_every", "eval_every", "torch_threads", "population", "generations", "trials",
+        "workers", "steps_per_iter", "replay_size", "substeps", "starts", "search_interval", "future_samples",
+        "future_spacing", "past_spacing", "history", "kernel", "pool", "fc_hidden", "ar_stride", "speed_frames",
+        "nn_pca_dims", "max_steps", "heading_window", "demo_oversample", "tournament", "periodic_iterations",
+        "periodic_scan", "loop_cycles_after", "init_retries",
+    ], _COUNT),
+    **dict.fromkeys([
+        "seed", "ramp_frames", "past_samples", "exclude_window", "end_buffer", "loop_cycles_before",
+        "loop_blend_frames", "max_delay", "min_phase_frames", "inertia_pose_frame", "value_clip", "entropy_coef",
+        "weight_decay", "logit_reg", "class_lr", "grad_clip", "momentum", "w_style", "w_class", "w_goal", "w_gp",
+        "w_class_loss", "w_stand", "w_mimic", "w_linear", "w_angular", "k_disp", "k_rot", "k_ee", "k_vel",
+        "force_reg", "torque_reg", "torque_limit", "correction_halflife", "heading_smoothing", "settle",
+        "window_cache_mb", "value_coef", "fall_tolerance", "crouch_drop", "crouch_ramp_s", "min_com_speed",
+        "loop_min_seconds", "bvh_scale", "nn_com_weight", "init_noise", "early_margin", "late_margin",
+    ], _NON_NEGATIVE),
+    **dict.fromkeys([
+        "lr", "physics_hz", "control_hz", "episode_seconds", "fps", "frame_unit_hz", "video_fps", "seconds",
+        "mass", "friction", "max_grad_norm", "action_std", "action_scale", "halflife", "speed", "laps", "h",
+        "energy_scale", "omega_floor", "circle_radius", "square_side", "star_outer", "star_inner", "horizon_s",
+        "max_com_step", "impulse_duration", "observe", "kp", "kd", "max_height", "clip", "max_stance_s",
+        "max_flight_s", "goal_sharpness", "sustained_force", "length",
+    ], _POSITIVE),
+    **dict.fromkeys([
+        "replay_fraction", "switch_prob", "cxpb", "mutpb", "indpb", "survive_rate", "early_min_swing",
+        "min_height_ratio",
+    ], _FRACTION),
+    "gamma": {"ge": 0, "lt": 1},
+    "lam": {"ge": 0, "le": 1},
+    "discount": {"gt": 0, "le": 1},
+}
+LIST_RULES: dict[str, dict] = {"hidden": _COUNT, "channels": _COUNT, "forces": _NON_NEGATIVE, "durations": _POSITIVE}
+_BOUND_TEXT = {"ge": ">=", "gt": ">", "le": "<=", "lt": "<"}
+_BOUND_OK = {"ge": lambda v, b: v >= b, "gt": lambda v, b: v > b, "le": lambda v, b: v <= b, "lt": lambda v, b: v < b}
+
+
+def _range_problem(key: str, value: Any, rule: dict | None) -> str | None:
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        return None
+    if not math.isfinite(value):
+        return f"{key} must be a finite number, got {value}"
+    for bound, limit in (rule or {}).items():
+        if bound in _BOUND_OK and not _BOUND_OK[bound](value, limit):
+            bounds = " and ".join(f"{_BOUND_TEXT[b]} {lim:g}" for b, lim in rule.items() if b in _BOUND_TEXT)
+            return f"{key} must be {bounds}, got {value:g}"
+    return None
+
+
+def check_ranges(cfg, schema: type, prefix: str = "") -> str | None:
+    """The first value of `cfg` outside its declared range (see RANGE_RULES), or None."""
+    if not dataclasses.is_dataclass(schema):
+        return None
+    for f in dataclasses.fields(schema):
+        if f.name not in cfg:
+            continue
+        value = cfg[f.name]
+        key = prefix + f.name
+        sub = _field_type(f)
+        if dataclasses.is_dataclass(sub):
+            problem = check_ranges(value, sub, key + ".")
+        elif _is_list(value):
+            elem = _list_element_type(f)
+            problem = None
+            for i, v in enumerate(value):
+                if elem is not None and dataclasses.is_dataclass(elem):
+                    problem = check_ranges(v, elem, f"{key}[{i}].")
+                else:
+                    problem = _range_problem(f"{key}[{i}]", v, LIST_RULES.get(f.name))
+                if problem:
+                    break
+        else:
+            rule = {k: v for k, v in f.metadata.items() if k in _BOUND_OK} if f.metadata else {}
+            problem = _range_problem(key, value, rule or RANGE_RULES.get(f.name))
+        if problem:
+            return problem
+    return None
+
+
+def _is_list(value: Any) -> bool:
+    from omegaconf import ListConfig
+
+    return isinstance(value, (list, tuple, ListConfig))
+
+
+def _list_element_type(f: dataclasses.Field) -> Any:
+    if f.default_factory is not dataclasses.MISSING:  # type: ignore[misc]
+        try:
+            items = f.default_factory()  # type: ignore[misc]
+        except Exception:
+            return None
+        if items and isinstance(items, list):
+            return type(items[0])
+    return None
+
+
+# ---------------------------------------------------------------------------- device
+_DEVICE_RE = re.compile(r"^(auto|cpu|cuda(:\d+)?)$")
+
+
+def check_device_name(device: Any, schema: type | None = None, experiment: str = "") -> str | None:
+    """`device` is auto | cpu | cuda | cuda:N, and one the experiment can use: a schema whose code has
+    no GPU path declares `DEVICES = ("cpu",)` (a class attribute) and refuses cuda instead of ignoring it."""
+    if not _DEVICE_RE.match(str(device)):
+        return f"device must be auto, cpu, cuda or cuda:N, got {device!r}"
+    devices = getattr(schema, "DEVICES", ("cpu", "cuda"))
+    if str(device).startswith("cuda") and "cuda" not in devices:
+        return f"{experiment or 'this experiment'} runs on the CPU only (no GPU code path); use device=cpu or device=auto"
+    return None
+
+
+def check_device_available(device: str) -> str | None:
+    """A one-line problem when `device` names a CUDA device this machine does not have (imports torch
+    only for cuda devices)."""
+    if not str(device).startswith("cuda"):
+        return None
+    import torch
+
+    if not torch.cuda.is_available():
+        return f"device={device} but no CUDA device is available on this machine (use device=cpu or device=auto)"
+    index = int(str(device).split(":")[1]) if ":" in str(device) else 0
+    if index >= torch.cuda.device_count():
+        return f"device={device} but this machine has {torch.cuda.device_count()} CUDA device(s)"
+    return None
+
+
+def resolve_device(device: str) -> str:
+    """The torch device an experiment should use: auto -> cuda when available, else cpu; a missing
+    CUDA device is a one-line CharctlError (also when a resumed run's config asks for one)."""
+    problem = check_device_name(device) or check_device_available(device)
+    if problem:
+        raise CharctlError(problem)
+    if device == "auto":
+        import torch
+
+        return "cuda" if torch.cuda.is_available() else "cpu"
+    return str(device)
 
 
 # ---------------------------------------------------------------------------- error messages
@@ -226,5 +383,5 @@ def _field_type(f: dataclasses.Field) -> Any:
 
 __all__ = [
     "BaseConfig", "compose_config", "validate", "expand_multirun", "experiment_choices", "scale_choices",
-    "check_experiment", "conf_dir", "to_yaml", "field", "dataclass",
+    "check_experiment", "conf_dir", "to_yaml", "field", "dataclass", "check_ranges", "resolve_device", "RANGE_RULES",
 ]

@@ -2,10 +2,8 @@
 
 from __future__ import annotations
 
-import contextlib
 import sys
 import time
-from typing import Iterator
 
 
 class TrainingProgress:
@@ -16,13 +14,21 @@ class TrainingProgress:
     """
 
     def __init__(self, total: float, description: str, unit: str = "samples", plain_every: float = 10.0):
-        from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
+        from rich.progress import (
+            BarColumn,
+            MofNCompleteColumn,
+            Progress,
+            TextColumn,
+            TimeElapsedColumn,
+            TimeRemainingColumn,
+        )
 
         self.total = total
         self.unit = unit
         self.description = description
         self.start = time.perf_counter()
         self.done = 0.0
+        self.resumed_from = 0.0  # work done before this session (a resumed run): not part of the rate
         self.interactive = sys.stderr.isatty()
         self.plain_every = plain_every
         self._last_plain = 0.0
@@ -35,7 +41,7 @@ class TrainingProgress:
             )
             self.task = self.progress.add_task(description, total=total, rate="", stats="")
 
-    def __enter__(self) -> "TrainingProgress":
+    def __enter__(self) -> TrainingProgress:
         if self.progress is not None:
             self.progress.start()
         return self
@@ -48,7 +54,13 @@ class TrainingProgress:
 
     @property
     def rate(self) -> float:
-        return self.done / max(time.perf_counter() - self.start, 1e-9)
+        """Units per second in this session (work done before a resume is not counted)."""
+        return (self.done - self.resumed_from) / max(time.perf_counter() - self.start, 1e-9)
+
+    def resume_at(self, done: float) -> None:
+        """Start the bar at `done` (a resumed run) without counting it in the rate."""
+        self.resumed_from = done
+        self.update(done)
 
     def update(self, n: float = 1, **stats: float) -> None:
         self.done += n
@@ -64,10 +76,4 @@ class TrainingProgress:
         if force or now - self._last_plain >= self.plain_every:
             self._last_plain = now
             pct = 100.0 * self.done / max(self.total, 1e-9)
-            print(f"{self.description}: {self.done:,.0f}/{self.total:,.0f} {self.unit} ({pct:.0f}%), {self.rate:,.0f} {self.unit}/s  {getattr(self, '_stats', '')}", file=sys.stderr, flush=True)
-
-
-@contextlib.contextmanager
-def track(total: float, description: str, unit: str = "items") -> Iterator[TrainingProgress]:
-    with TrainingProgress(total, description, unit) as bar:
-        yield bar
+            print(f"{self.description}: {self.done:,.0f}/{self.total:,.0f} {self.unit} " f"({pct:.0f}%), {self.rate:,.0f} {self.unit}/s  {getattr(self, '_stats', '')}", file=sys.stderr, flush=True)

@@ -26,7 +26,13 @@ def main() -> None:
     from charctl.config import compose_config
     from charctl.experiments.cgail.config import Config
     from charctl.experiments.cgail.env import CgailEnv
-    from charctl.experiments.cgail.train import build_agent, collect_rollout, discriminator_rewards, total_reward, update_discriminator
+    from charctl.experiments.cgail.train import (
+        build_agent,
+        collect_rollout,
+        discriminator_rewards,
+        total_reward,
+        update_discriminator,
+    )
 
     cfg = compose_config("cgail", [*a.overrides, f"env.num_envs={a.envs}"], Config)
     torch.set_num_threads(int(cfg.train.torch_threads))
@@ -71,9 +77,9 @@ def main() -> None:
             phases[k] += v
     full = T * a.iters * env.N / (time.perf_counter() - t_all)
     total = sum(phases.values())
-    print(f"cgail bench: {env.N} envs, physics {cfg.env.physics_hz:.0f} Hz / control {cfg.env.control_hz:.0f} Hz, policy {list(cfg.ppo.hidden)}, disc {list(cfg.disc.hidden)}")
+    print(f"cgail bench: {env.N} envs, physics {cfg.env.physics_hz:.0f} Hz / control " f"{cfg.env.control_hz:.0f} Hz, policy {list(cfg.ppo.hidden)}, disc {list(cfg.disc.hidden)}")
     print(f"  raw batched physics     {raw:10,.0f} samples/s (control steps of all envs)")
-    print(f"  rollout (+obs, policy, disc reward) {rollout:10,.0f} samples/s = {100 * rollout / raw:.0f} % of raw physics (target >= 70 %)")
+    print(f"  rollout (+obs, policy, disc reward) {rollout:10,.0f} samples/s " f"= {100 * rollout / raw:.0f} % of raw physics (target >= 70 %)")
     print(f"  whole training loop     {full:10,.0f} samples/s")
     print("  time per phase: " + ", ".join(f"{k} {100 * v / total:.0f} %" for k, v in phases.items()))
 

@@ -67,7 +67,7 @@ def bench_qp(cfg, n: int) -> dict:
     out: dict = {"envs": n}
     out["build_us_per_env"] = 1e6 * timed(lambda: Q.reduced_problem(batch, params), 50) / n
     for name, solve in Q.SOLVERS.items():
-        per = timed(lambda: [solve(h[i], f[i], lb[i], ub[i]) for i in range(n)], 20 if name == "daqp" else 5) / n
+        per = timed(lambda: [solve(h[i], f[i], lb[i], ub[i]) for i in range(n)], 20 if name == "daqp" else 5) / n  # noqa: B023
         out[f"solve_us[{name}]"] = 1e6 * per
         out[f"solves_per_s[{name}]"] = 1.0 / per
     infos = [daqp.solve(h[i], f[i], np.zeros((0, Q.N_VARS)), ub[i], lb[i])[3] for i in range(n)]
@@ -86,7 +86,7 @@ def bench_rollout_and_training(cfg, envs: int, steps: int, iterations: int) -> d
     import torch
 
     from charctl.experiments.srb.env import ACT_DIM, OBS_DIM, SRBEnv
-    from charctl.experiments.srb.trainer import build_agent, collect_rollout
+    from charctl.experiments.srb.train import build_agent, collect_rollout
     from charctl.rl.storage import RolloutStorage
 
     torch.set_num_threads(1)
@@ -135,11 +135,11 @@ def main() -> None:
     for k, v in qp.items():
         if k != "envs":
             print(f"  {k:38s} {v:12,.1f}")
-    print(f"rollout / training ({args.envs} envs x {args.steps} steps, {args.iterations} PPO iterations, 1 core):")
+    print(f"rollout / training ({args.envs} envs x {args.steps} " f"steps, {args.iterations} PPO iterations, 1 core):")
     for k, v in run.items():
         print(f"  {k:38s} {v:12,.2f}")
-    print(f"paper: {PAPER_SAMPLES_PER_S:,.0f} samples/s on {PAPER_CORES} cores = {per_core_paper:,.0f} per core")
-    print(f"ours / paper per core: {result['ratio_training_per_core_vs_paper']:.3f}  (ours / paper machine: {result['ratio_training_vs_paper_machine']:.4f})")
+    print(f"paper: {PAPER_SAMPLES_PER_S:,.0f} samples/s on " f"{PAPER_CORES} cores = {per_core_paper:,.0f} per core")
+    print(f"ours / paper per core: {result['ratio_training_per_core_vs_paper']:.3f}  " f"(ours / paper machine: {result['ratio_training_vs_paper_machine']:.4f})")
     if args.json:
         with open(args.json, "w") as fh:
             json.dump(result, fh, indent=2)

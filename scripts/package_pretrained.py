@@ -29,8 +29,9 @@ def main() -> None:
     payload = torch.load(a.run_dir / "checkpoints" / "last.pt", map_location="cpu", weights_only=True)
     payload["state"].pop("replay", None)
     a.dest.mkdir(parents=True, exist_ok=True)
-    for name in ("config.yaml", "metrics.json"):
-        shutil.copy2(a.run_dir / name, a.dest / name)
+    for name in ("config.yaml", "metrics.json"):  # an interrupted run has no metrics.json
+        if (a.run_dir / name).is_file():
+            shutil.copy2(a.run_dir / name, a.dest / name)
     if (a.dest / "tb").exists():
         shutil.rmtree(a.dest / "tb")
     shutil.copytree(a.run_dir / "tb", a.dest / "tb")

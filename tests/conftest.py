@@ -13,10 +13,10 @@ import subprocess
 import sys
 from pathlib import Path
 
-import charctl  # noqa: F401  (first: picks MuJoCo's headless GL backend before any test imports mujoco)
-
 import numpy as np
 import pytest
+
+import charctl  # noqa: F401  (first: picks MuJoCo's headless GL backend before any test imports mujoco)
 
 REPO = Path(__file__).resolve().parent.parent
 VENV_BIN = Path(sys.executable).parent
@@ -107,3 +107,34 @@ def write_motion(tmp_path):
         return path
 
     return _write
+
+
+@pytest.fixture(scope="session")
+def smoke_run(tmp_path_factory):
+    """`charctl train NAME scale=smoke` through the installed console script, once per experiment and
+    session (tests/test_smoke.py checks every one); returns NAME -> its run directory. Tests that
+    change a run (resume, evaluation files) take a copy with `smoke_run_copy`."""
+    root = tmp_path_factory.mktemp("smoke_runs")
+    runs: dict[str, Path] = {}
+
+    def get(name: str) -> Path:
+        if name not in runs:
+            res = run_charctl("train", name, "scale=smoke", f"output_root={root}", timeout=600)
+            assert res.returncode == 0, res.stdout + res.stderr
+            (runs[name],) = (root / name).iterdir()
+        return runs[name]
+
+    return get
+
+
+@pytest.fixture
+def smoke_run_copy(smoke_run, tmp_path):
+    """A private copy of the session's smoke run of NAME at tmp_path/NAME/<run>/."""
+
+    def copy(name: str) -> Path:
+        import shutil
+
+        src = smoke_run(name)
+        return Path(shutil.copytree(src, tmp_path / name / src.name))
+
+    return copy

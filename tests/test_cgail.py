@@ -5,7 +5,13 @@ import pytest
 import torch
 
 from charctl.experiments.cgail.discriminator import (
-    Discriminator, blended_class_reward, class_loss, class_reward, gradient_penalty, style_loss, style_reward,
+    Discriminator,
+    blended_class_reward,
+    class_loss,
+    class_reward,
+    gradient_penalty,
+    style_loss,
+    style_reward,
 )
 
 torch.set_num_threads(1)
@@ -122,11 +128,11 @@ def test_features_agree_between_clip_and_simulator():
     np.testing.assert_allclose(disc_obs(sim_kinematics(sim)), o_sim, atol=1e-9)
 
 
-def test_smoke_training_and_resume(tmp_path):
+def test_smoke_training_and_resume(smoke_run_copy):
     from charctl.commands.train import train_command
     from charctl.runs import load_checkpoint
 
-    (run_dir,) = train_command("cgail", ["scale=smoke", f"output_root={tmp_path}"])
+    run_dir = smoke_run_copy("cgail")  # `charctl train cgail scale=smoke`, once per session (test_smoke.py)
     state = load_checkpoint(run_dir / "checkpoints" / "last.pt", "cgail")
     assert state["iteration"] == 4 and state["samples"] == 512
     assert (run_dir / "config.yaml").is_file() and (run_dir / "metrics.json").is_file()
@@ -147,10 +153,10 @@ def test_amp_baseline_smoke(tmp_path):
     assert state["ppo"]["model"]["actor.0.weight"].shape[1] == 243  # no command input
 
 
-def test_wrong_checkpoint_is_one_line_error(tmp_path):
+def test_wrong_checkpoint_is_one_line_error(smoke_run_copy):
     from charctl.commands.train import train_command
     from charctl.errors import CharctlError
 
-    (run_dir,) = train_command("cgail", ["scale=smoke", f"output_root={tmp_path}"])
+    run_dir = smoke_run_copy("cgail")
     with pytest.raises(CharctlError, match="hidden"):
         train_command("cgail", ["ppo.hidden=[16]", "train.total_samples=2048"], resume=run_dir)

@@ -46,11 +46,14 @@ def test_pose_error_zero_against_itself_and_sign_invariant():
 
 
 @pytest.fixture(scope="module")
-def smoke_runs(tmp_path_factory):
+def smoke_runs(tmp_path_factory, smoke_run):
+    import shutil
+    from pathlib import Path
+
     from charctl.commands.train import train_command
 
     root = tmp_path_factory.mktemp("cgail_eval")
-    (cg,) = train_command("cgail", ["scale=smoke", f"output_root={root}/c"])
+    cg = Path(shutil.copytree(smoke_run("cgail"), root / "c" / "cgail" / smoke_run("cgail").name))  # test_smoke.py's run
     (amp,) = train_command("cgail", ["scale=smoke", "cgail.conditional=false", f"output_root={root}/a"])
     return cg, amp, root
 

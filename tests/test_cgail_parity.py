@@ -119,3 +119,30 @@ def test_tracking_env_phase_and_clip_end():
     res = env.step(np.zeros((1, 28)))
     res = env.step(np.zeros((1, 28)))
     assert res.truncated[0] or res.terminated[0]
+
+
+def test_class_reward_forms_hand_values():
+    """l1 (eq 4.8) = max(0, 2 P(c) - 1) for a one-hot command; prob = P(c); both blended by eq 4.11."""
+    from charctl.experiments.cgail.discriminator import blended_class_reward
+
+    probs = torch.tensor([[0.2, 0.7, 0.1], [0.2, 0.7, 0.1]])
+    a, b, w = torch.tensor([1, 0]), torch.tensor([1, 1]), torch.tensor([1.0, 0.5])
+    assert blended_class_reward(probs, a, b, w, 3, "l1").tolist() == pytest.approx([0.4, 0.5 * 0.0 + 0.5 * 0.4])
+    assert blended_class_reward(probs, a, b, w, 3, "prob").tolist() == pytest.approx([0.7, 0.5 * 0.2 + 0.5 * 0.7])
+    with pytest.raises(ValueError):
+        blended_class_reward(probs, a, b, w, 3, "other")
+
+
+def test_bce_objective_and_regularisers_hand_values():
+    """bce reward -log(1 - sigmoid(D)) at D = 0 is log 2; the regularisers are sums of squared weights."""
+    from charctl.experiments.cgail.discriminator import (
+        Discriminator, logit_regulariser, style_loss, style_reward, weight_decay_term,
+    )
+
+    assert style_reward(torch.tensor([0.0]), "bce").item() == pytest.approx(np.log(2.0))
+    assert style_loss(torch.tensor([0.0]), torch.tensor([0.0]), "bce").item() == pytest.approx(2 * np.log(2.0))
+    disc = Discriminator(4, 2, [3], conditional=True)
+    w_head = disc.style_head.weight.detach()
+    assert logit_regulariser(disc).item() == pytest.approx(float((w_head**2).sum()), rel=1e-6)
+    total = sum(float((m.weight.detach() ** 2).sum()) for m in disc.modules() if isinstance(m, torch.nn.Linear))
+    assert weight_decay_term(disc).item() == pytest.approx(total, rel=1e-6)

@@ -1,4 +1,4 @@
-"""com-cnn (SPEC §3): dataset windows, the paper's COM, network shapes, learning, the COM clamp,
+"""com-cnn (docs/com-cnn.md): dataset windows, the paper's COM, network shapes, learning, the COM clamp,
 the split, the COM-path parser, BVH folders, and the pipeline end to end at smoke scale."""
 
 from __future__ import annotations
@@ -86,9 +86,14 @@ def test_looping_clips_are_tiled_without_jumps_and_start_at_the_origin_facing_pl
     assert seq.cycles == math.ceil(6.0 * 30 / (raw.num_frames - 1)) and seq.num_frames == seq.cycles * (raw.num_frames - 1) + 1
     np.testing.assert_allclose(seq.root_pos[0, [0, 2]], 0.0, atol=1e-9)
     assert heading_yaw(seq.root_rot[0], body.forward) == pytest.approx(0.0, abs=1e-9)
-    step = lambda p: np.linalg.norm(np.diff(p[:, [0, 2]], axis=0), axis=1).max()
+    def step(p):
+        return np.linalg.norm(np.diff(p[:, [0, 2]], axis=0), axis=1).max()
+
     assert step(seq.root_pos) < 1.2 * step(raw.root_pos)  # the root path continues across the seams
-    joint_step = lambda q: np.degrees(R.angle_between(q[1:], q[:-1])).max()
+
+    def joint_step(q):
+        return np.degrees(R.angle_between(q[1:], q[:-1])).max()
+
     # this clip's loop is 53 deg off at the neck; blended over 6 frames the seams stay near the clip's own steps
     assert joint_step(seq.joint_rot) < 1.3 * joint_step(raw.local_rot[:, 1:])
     total_turn = np.unwrap(heading_yaw(seq.root_rot, body.forward))
@@ -209,11 +214,11 @@ def test_too_short_history_for_the_layers_is_a_one_line_config_error():
 
 # ---------------------------------------------------------------------------- learning
 def test_tiny_training_run_lowers_the_loss_and_resumes(tmp_path):
+    from charctl.experiments.com_cnn.config import Config
     from charctl.experiments.com_cnn.data import build_windows
     from charctl.experiments.com_cnn.model import build_model
     from charctl.experiments.com_cnn.train import BatchSource, normalizer_stats, teacher_forced, train
     from charctl.runs import new_run, open_run
-    from charctl.experiments.com_cnn.config import Config
 
     cfg = compose("scale=smoke", "data.clips=[walk,walker/turn_right1]", "data.test_clips=[walker/turn_right1]",
                   "data.history=15", "model.kernel=2", "model.channels=[8,16,32]", "train.steps=150",

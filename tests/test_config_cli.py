@@ -33,6 +33,7 @@ DEMO_PACKAGE = '''
 from dataclasses import dataclass, field
 
 from charctl.config import BaseConfig
+from charctl.experiments import Experiment
 
 
 @dataclass
@@ -49,8 +50,10 @@ class Config(BaseConfig):
     ppo: PPO = field(default_factory=PPO)
 
 
-def schema():
-    return Config
+EXPERIMENT = Experiment(
+    name="demo", summary="a throw-away experiment", schema="charctl_demo_experiment:Config",
+    train="charctl_demo_experiment:train",
+)
 
 
 def train(cfg, run):
@@ -220,10 +223,11 @@ def test_export_bvh_cli(tmp_path, walk_raw_frames):
     np.testing.assert_allclose(back.body_pos, clip.body_pos, atol=1e-4)
 
     out60 = tmp_path / "walk60.bvh"
-    _ok(run_charctl("export", "bvh", "walk", "-o", str(out60), "--fps", "60"))
+    said = _ok(run_charctl("export", "bvh", "walk", "-o", str(out60), "--fps", "60"))
     back60 = read_bvh_as_clip(out60)
     duration = walk_raw_frames[:-1, 0].sum()
     assert back60.num_frames == round(duration * 60) + 1 == 77
+    assert "77 frames at 60.00 fps" in said  # the message states what was written
     assert back60.fps == pytest.approx(60.0, rel=0.01)
     assert back60.duration == pytest.approx(duration, rel=1e-6)
     np.testing.assert_allclose(back60.body_pos, clip.resample(60).body_pos, atol=1e-4)
@@ -362,7 +366,7 @@ def test_compose_config_in_process(demo_root, monkeypatch):
     assert experiment_choices() == ["demo"] and scale_choices() == ["paper", "small", "smoke"]
     cfg = compose_config("demo", ["scale=smoke", "ppo.epochs=9"], Config)
     assert cfg.iterations == 1 and cfg.ppo.epochs == 9 and cfg.ppo.lr == 0.001
-    with pytest.raises(Exception):  # struct mode: reading an unknown key fails
+    with pytest.raises(AttributeError):  # struct mode: reading an unknown key fails (omegaconf's ConfigAttributeError)
         _ = cfg.ppo.lrr
     with pytest.raises(CharctlError) as exc:
         compose_config("demo", ["ppo.lrr=1"], Config)
@@ -522,10 +526,12 @@ def test_failed_save_keeps_the_previous_checkpoint(tmp_path, torch_mod, monkeypa
         raise OSError("disk full")
 
     monkeypatch.setattr(torch, "save", broken_save)
-    with pytest.raises(OSError):
+    with pytest.raises(CharctlError) as exc:  # an OS error of the writer is a one-line error naming the file
         save_checkpoint(path, "cgail", {"iteration": 2})
+    assert_one_line(exc.value, str(path), "disk full", "previous checkpoint is kept")
     monkeypatch.undo()
     assert load_checkpoint(path, "cgail")["iteration"] == 1
+    assert [p.name for p in tmp_path.iterdir()] == ["last.pt"]  # no temp file left
 
 
 def test_run_directory_life_cycle(tmp_path, torch_mod):

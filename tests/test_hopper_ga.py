@@ -39,7 +39,7 @@ def test_flight_time_matches_independent_ballistic_root():
     g = -9.81
     T = M.flight_time(y0, vy0, yf, g)
     for i in range(200):
-        f = lambda t: y0[i] + vy0[i] * t + 0.5 * g * t * t - yf[i]  # noqa: E731
+        f = lambda t: y0[i] + vy0[i] * t + 0.5 * g * t * t - yf[i]  # noqa: E731, B023 (called in this iteration)
         t_apex = max(vy0[i] / -g, 0.0)
         if f(t_apex) < 0:  # never reaches yf on the way down: eq 4 has no real root
             assert np.isnan(T[i])

@@ -100,7 +100,7 @@ def test_cli_train_with_ray_export_and_report(tmp_path):
     assert len(bvh.names) == 11 and bvh.num_frames >= 12
     assert (tmp_path / "run.mp4").stat().st_size > 1000
 
-    from charctl.experiments.hopper_ga import evaluate
+    from charctl.experiments.hopper_ga.evaluate import evaluate
 
     evaluate([str(run_dir)], {"curves": True, "out": tmp_path / "report"}, [])  # what `charctl eval RUN --curves -o DIR` calls
     report = (tmp_path / "report" / "report.md").read_text()

@@ -19,7 +19,7 @@ from charctl.motion import rotations as R
 from charctl.motion.clip import Clip
 from charctl.motion.deepmimic import FRAME_SIZE, LAYOUT, decode_frames, encode_frames
 from charctl.motion.library import catalogue, clip_names, load_clip
-from charctl.motion.skeleton import BODY_NAMES, CLIP_JOINTS, HINGE_JOINTS, load_skeleton, humanoid_urdf_path
+from charctl.motion.skeleton import BODY_NAMES, CLIP_JOINTS, HINGE_JOINTS, humanoid_urdf_path, load_skeleton
 
 from conftest import assert_one_line
 

@@ -121,7 +121,7 @@ def test_blocks_are_normalised_and_weighted(smoke_db):
     cfg, db = smoke_db
     L = db.layout
     feats = db.features[db.search_rows]
-    for name, cols in L.blocks.items():
+    for cols in L.blocks.values():
         x = feats[:, cols] / L.sqrt_w[cols]
         np.testing.assert_allclose(x.mean(axis=0), 0.0, atol=1e-9)
         assert x.std(axis=0).mean() == pytest.approx(1.0, rel=1e-6)
@@ -161,7 +161,9 @@ def test_rollout_pose_has_no_jump_at_transitions(smoke_db):
     cfg, db = smoke_db
     r = run_path(db, make_index("kdtree", db), make_path("star", cfg.paths), cfg, with_pose=True)
     assert r.jumps > 5
-    step = lambda q: R.angle_between(q[1:], q[:-1]).max(axis=1)  # largest joint rotation per frame
+    def step(q):  # largest joint rotation per frame
+        return R.angle_between(q[1:], q[:-1]).max(axis=1)
+
     raw = step(db.pose[r.frames])  # the database frames played, without blending
     out = step(r.pose)
     transitions = np.flatnonzero(np.diff(r.frames) != 1)
@@ -277,7 +279,7 @@ def test_config_errors_are_one_line():
 
 # ---------------------------------------------------------------------------- Table 1 and end to end
 def test_table1_cases():
-    from charctl.experiments.motion_matching.study import TABLE1, describe, with_case
+    from charctl.experiments.motion_matching.cases import TABLE1, describe, with_case
 
     assert sorted(TABLE1) == list(range(1, 20))
     assert [TABLE1[n]["future_samples"] for n in range(1, 8)] == list(range(1, 8))
@@ -288,7 +290,8 @@ def test_table1_cases():
 
 
 def test_sweep_and_export_smoke(tmp_path):
-    from charctl.experiments.motion_matching import evaluate, export
+    from charctl.experiments.motion_matching.evaluate import evaluate
+    from charctl.experiments.motion_matching.export import export
     from charctl.motion.bvh import read_bvh_as_clip
 
     out = tmp_path / "sweep"
@@ -315,7 +318,7 @@ def test_sweep_and_export_smoke(tmp_path):
     assert metrics["case"] == int(best) and metrics["e_time_mean"] < 1.0
     assert (run.parent / "path.png").is_file()
     np.testing.assert_allclose(clip.root_pos[0, [0, 2]], [0.0, 0.0], atol=1e-5)
-    from charctl.experiments.motion_matching.report import write_report
+    from charctl.experiments.motion_matching.evaluate import write_report
 
     text = write_report(out).read_text()
     assert "| 8 |" in text and "searches in the sweep ended in a jump" in text and "walker/turn_left0" in text
@@ -324,8 +327,8 @@ def test_sweep_and_export_smoke(tmp_path):
 def test_user_bvh_folder_gives_the_same_features_and_exports_its_skeleton(tmp_path):
     """A BVH folder of the humanoid's own (unrolled) clips: the generic joint-position features
     match the humanoid database frame for frame, and the result is written on the user's skeleton."""
-    from charctl.experiments.motion_matching.app import write_rollout_bvh
     from charctl.experiments.motion_matching.database import build_database
+    from charctl.experiments.motion_matching.export import write_rollout_bvh
     from charctl.experiments.motion_matching.paths import make_path
     from charctl.experiments.motion_matching.runtime import run_path
     from charctl.experiments.motion_matching.search import make_index

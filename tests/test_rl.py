@@ -1,6 +1,5 @@
 """PPO maths: GAE by hand, clipped surrogate, save/load round trip, same seed same weights."""
 
-import math
 
 import pytest
 import torch

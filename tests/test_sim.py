@@ -1,9 +1,8 @@
 """Humanoid MJCF, clip<->qpos mapping and the batched simulator."""
 
+import mujoco
 import numpy as np
 import pytest
-
-mujoco = pytest.importorskip("mujoco")
 
 from charctl.motion import rotations as R
 from charctl.motion.library import load_clip

@@ -10,7 +10,6 @@ inertia; hand-built states for termination and touch-down rules.
 from __future__ import annotations
 
 import json
-import math
 
 import numpy as np
 import pytest
@@ -21,7 +20,7 @@ from charctl.experiments.srb.config import Config
 from charctl.experiments.srb.qp import GRAVITY, N_EDGES, QPBatch, QPParams, friction_basis, full_problem, solve_batch
 from charctl.motion import rotations as R
 
-from conftest import assert_one_line, run_charctl
+from conftest import assert_one_line
 
 torch = pytest.importorskip("torch")
 torch.set_num_threads(1)
@@ -356,15 +355,13 @@ def test_run_push_study_table_and_largest_force():
 
 
 # ---------------------------------------------------------------------------- end to end
-def test_smoke_train_resume_push_and_video(tmp_path):
+def test_smoke_train_resume_push_and_video(tmp_path, smoke_run_copy):
     from charctl.commands.evaluate import eval_command
     from charctl.commands.export import export_command
     from charctl.commands.train import train_command
     from charctl.errors import CharctlError
 
-    res = run_charctl("train", "srb", "scale=smoke", f"output_root={tmp_path}", timeout=240)  # the user's path, once
-    assert res.returncode == 0, res.stdout + res.stderr
-    run_dir = next((tmp_path / "srb").iterdir())
+    run_dir = smoke_run_copy("srb")  # `charctl train srb scale=smoke`, the user's path, once per session (test_smoke.py)
     metrics = json.loads((run_dir / "metrics.json").read_text())
     assert metrics["samples"] == 2048 and metrics["iterations"] == 2 and metrics["qp_failures"] == 0
     assert 1 <= metrics["episode_length"] <= 90 and (run_dir / "checkpoints" / "last.pt").is_file()
@@ -411,8 +408,8 @@ def test_bad_config_is_one_line(tmp_path):
 
 def test_full_body_baseline_is_found_and_run_through_the_protocol(tmp_path, monkeypatch):
     import charctl.experiments.cgail.push as cgail_push
+    from charctl.experiments.srb.evaluate import _baseline_label, _baseline_table, find_baseline_run
     from charctl.experiments.srb.push import make_cases
-    from charctl.experiments.srb.study import _baseline_label, _baseline_table, find_baseline_run
 
     def fake_run(name, conditional, skills):
         d = tmp_path / "repro" / "cgail" / name

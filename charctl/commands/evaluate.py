@@ -1,10 +1,14 @@
-"""`charctl eval [RUN_DIR ... | EXPERIMENT] [flags] [overrides]`: dispatch to the experiment."""
+"""`charctl eval EXPERIMENT|RUN_DIR [RUN_DIR ...] [options] [overrides]`: dispatch to the experiment."""
 
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from charctl.errors import CharctlError
+
+if TYPE_CHECKING:
+    from charctl.experiments import Experiment
 
 
 def split_targets(targets: list[str]) -> tuple[list[str], list[str]]:
@@ -15,26 +19,34 @@ def split_targets(targets: list[str]) -> tuple[list[str], list[str]]:
 
 
 def eval_command(targets: list[str], options: dict) -> None:
-    from charctl.experiments import EXPERIMENTS, entry
-    from charctl.runs import latest_run, run_experiment
+    """The first target (an experiment name or a run directory) selects the experiment; the options
+    it declares are checked and every target and override is handed to its `evaluate`."""
+    from charctl.experiments import experiment_of, select_options
+    from charctl.options import check_options
+
+    check_options(options)  # -k >= 1, finite numbers, a writable -o: before any work or file
 
     rest, overrides = split_targets(targets)
     if not rest:
-        rest = [str(latest_run("outputs", "cgail"))]
-    experiments = set()
-    for t in rest:
-        if t in EXPERIMENTS:
-            experiments.add(t)
-        elif Path(t).is_dir():
-            experiments.add(run_experiment(t))
-        else:
-            raise CharctlError(f"{t!r} is neither a run directory nor an experiment ({', '.join(sorted(EXPERIMENTS))})")
-    if len(experiments) > 1:
-        first = rest[0] if rest[0] in EXPERIMENTS else run_experiment(rest[0])
-        if not (options.get("push") and first == "srb" and experiments == {"srb", "cgail"}):
-            raise CharctlError(f"evaluate runs of one experiment at a time (got {', '.join(sorted(experiments))})")
-        experiments = {first}  # srb's push study takes a cgail run as its full-body baseline
-    experiment = experiments.pop()
-    if not any(v not in (None, False) for k, v in options.items() if k not in ("episodes", "out")):
-        raise CharctlError("say what to evaluate: --dtw, --confusion, --switch A B, --curves, --pose-error, --push or --sweep")
-    entry(experiment, "evaluate")(rest, options, overrides)
+        raise CharctlError("name an experiment or a run directory: charctl eval EXPERIMENT|RUN_DIR ...")
+    exp = experiment_of(rest[0])
+    _check_runs_belong(exp, rest[1:])
+    chosen = select_options(exp, "eval", options)
+    modes = [o for o in exp.eval_options if o.mode]
+    if not any(chosen[o.name] not in (None, False) for o in modes):
+        raise CharctlError(f"say what to evaluate: {', '.join(o.flag for o in modes)}")
+    exp.entry("evaluate")(rest, chosen, overrides)
+
+
+def _check_runs_belong(exp: Experiment, targets: list[str]) -> None:
+    """Every further target is the experiment's name, one of its runs, or a run of an experiment that
+    provides a capability `exp` accepts (`Experiment.eval_accepts`, e.g. a full-body baseline run)."""
+    from charctl.experiments import experiment_of
+
+    found = {exp.name}
+    for t in targets:
+        other = experiment_of(t)
+        if other.name != exp.name and not set(exp.eval_accepts) & set(other.provides):
+            found.add(other.name)
+    if len(found) > 1:
+        raise CharctlError(f"evaluate runs of one experiment at a time (got {', '.join(sorted(found))})")

@@ -8,22 +8,19 @@ from charctl.errors import CharctlError
 
 
 def export_command(target: str, args: list[str], options: dict) -> None:
+    from charctl.options import check_options
+
+    check_options(options)  # numbers in range, every output writable: before any work or file
     if target in ("bvh", "video"):
         return export_clip(target, args, options)
-    from charctl.experiments import EXPERIMENTS, entry
-    from charctl.runs import run_experiment
+    from charctl.experiments import experiment_of, select_options
 
-    if target in EXPERIMENTS:
-        experiment = target
-    elif Path(target).is_dir():
-        experiment = run_experiment(target)
-    else:
-        raise CharctlError(f"{target!r} is not 'bvh', 'video', a run directory or an experiment ({', '.join(sorted(EXPERIMENTS))})")
+    exp = experiment_of(target)
     overrides = [a for a in args if "=" in a]
     stray = [a for a in args if "=" not in a]
     if stray:
         raise CharctlError(f"unexpected argument(s) {' '.join(stray)}; overrides look like key=value")
-    entry(experiment, "export")(target, options, overrides)
+    exp.entry("export")(target, select_options(exp, "export", options), overrides)
 
 
 def export_clip(kind: str, args: list[str], options: dict) -> None:
@@ -39,7 +36,8 @@ def export_clip(kind: str, args: list[str], options: dict) -> None:
         from charctl.motion.bvh import write_bvh
 
         path = write_bvh(clip, out, fps=options.get("fps"))
-        print(f"wrote {path} ({clip.num_frames} frames)")
+        frames, fps = _bvh_frames(path)
+        print(f"wrote {path} ({frames} frames at {fps:.2f} fps, {(frames - 1) / fps:.2f} s)")
     else:
         from charctl.viz.video import render_clip
 
@@ -47,9 +45,23 @@ def export_clip(kind: str, args: list[str], options: dict) -> None:
         print(f"wrote {out} ({info['frames']} frames, {info['render_fps']:.0f} frames/s rendered)")
 
 
-def play_command(run_dir: Path | None) -> None:
-    from charctl.experiments import entry
-    from charctl.runs import latest_run, run_experiment
+def _bvh_frames(path: Path) -> tuple[int, float]:
+    """(frame count, frames per second) from a BVH file's MOTION header: what was really written."""
+    frames, frame_time = 0, 0.0
+    with open(path) as fh:
+        for line in fh:
+            if line.startswith("Frames:"):
+                frames = int(line.split()[1])
+            elif line.startswith("Frame Time:"):
+                frame_time = float(line.split()[2])
+                break
+    return frames, 1.0 / frame_time if frame_time > 0 else 0.0
 
-    run_dir = run_dir or latest_run("outputs", "cgail")
-    entry(run_experiment(run_dir), "play")(run_dir)
+
+def play_command(target: str) -> None:
+    """`charctl play EXPERIMENT|RUN_DIR`: the experiment's interactive viewer on a run (the name = its latest run)."""
+    from charctl.experiments import experiment_of, latest_run_dir
+
+    exp = experiment_of(target)
+    play = exp.entry("play")
+    play(latest_run_dir(exp.name) if target == exp.name else Path(target))

@@ -8,19 +8,19 @@ from charctl.errors import CharctlError
 
 
 def _schema(experiment: str) -> type:
-    from charctl.experiments import entry
+    from charctl.experiments import load
 
-    return entry(experiment, "schema")()
+    return load(experiment).config_class()
 
 
 def train_command(experiment: str, overrides: list[str], resume: Path | None = None, multirun: bool = False) -> list[Path]:
     """Compose/validate the config, create (or reopen) the run directory, hand over to the experiment."""
     from charctl.config import check_experiment, compose_config, expand_multirun
-    from charctl.experiments import entry
+    from charctl.experiments import load
     from charctl.runs import new_run, open_run, run_experiment
 
     check_experiment(experiment)
-    train_fn = entry(experiment, "train")
+    train_fn = load(experiment).entry("train")
     schema = _schema(experiment)
     if resume is not None:
         if multirun:
@@ -48,13 +48,31 @@ def train_command(experiment: str, overrides: list[str], resume: Path | None = N
 
 
 def _run(train_fn, run) -> None:
+    from charctl.runs import capture_mujoco_log, stop_signal
+
+    capture_mujoco_log(run.dir)  # MuJoCo warnings go to <run>/mujoco.log, not ./MUJOCO_LOG.TXT
     try:
         metrics = train_fn(run.cfg, run)
     finally:
         run.close()
+        _report_mujoco_warnings(run)
+    if stop_signal() is not None:  # a loop that broke out on Ctrl-C / SIGTERM and returned: still an interruption
+        from charctl.errors import Interrupted
+
+        raise Interrupted(f"interrupted: checkpoint written to {run.checkpoint_path}; continue with --resume {run.dir}",
+                          signum=stop_signal())
     if metrics:
         summary = ", ".join(f"{k}={v:.4g}" if isinstance(v, float) else f"{k}={v}" for k, v in list(metrics.items())[:8] if not isinstance(v, (dict, list)))
         print(f"done: {summary}")
+
+
+def _report_mujoco_warnings(run) -> None:
+    from charctl.runs import MUJOCO_LOG, count_mujoco_warnings
+
+    n = count_mujoco_warnings(run.dir)
+    if n:
+        print(f"note: MuJoCo reported {n} simulator warning(s) (unstable states, reset and counted); "
+              f"see {run.dir / MUJOCO_LOG}")
 
 
 def print_config(experiment: str, overrides: list[str]) -> None:

@@ -1,4 +1,4 @@
-"""Pose distances between sequences of joint rotations (SPEC §1, e_pose)."""
+"""Pose distances between sequences of joint rotations (e_pose of docs/cgail.md, the paper's eq. 6.1)."""
 
 from __future__ import annotations
 

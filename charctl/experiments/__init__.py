@@ -1,19 +1,33 @@
-"""Experiment registry: name -> package. Each package's `__init__` stays light (no torch/mujoco
-imports at module level) and provides:
+"""The experiment registry: one explicit `Experiment` record per experiment, in one dict.
 
-    schema() -> type                      the structured config dataclass (subclass of BaseConfig)
-    train(cfg, run) -> dict               run one training job into `run` (charctl.runs.Run)
-    evaluate(targets, options, overrides) `charctl eval`: targets are run dirs (or the experiment
-                                          name), options the eval flags that were given
-    export(target, options, overrides)    `charctl export RUN_DIR|EXPERIMENT ...`
+`EXPERIMENTS` maps an experiment name to its package; the package's `__init__` holds a single
+`EXPERIMENT = Experiment(...)` and nothing heavy (no torch/mujoco at import), so the CLI can list
+experiments and their options without loading any of them. Entry points are "module:attribute"
+references, imported only when called:
 
-Optional: `play(run_dir, overrides)`. Missing functions give a clear "not supported" error.
+    schema    the structured config dataclass (a `charctl.config.BaseConfig` subclass)
+    train     train(cfg, run) -> metrics dict            `charctl train NAME [overrides]`
+    evaluate  evaluate(targets, options, overrides)      `charctl eval NAME|RUN... [options]`
+    export    export(target, options, overrides)         `charctl export NAME|RUN [options]`
+    play      play(run_dir)                              `charctl play NAME|RUN` (optional)
+
+`eval_options` / `export_options` declare the command-line options the experiment adds to
+`charctl eval` / `charctl export`; the CLI builds each experiment's option set from them.
+`provides` names optional capabilities another experiment may use through the registry (never by
+importing the provider), e.g. cgail's `push_rollout` is srb's full-body push baseline.
+
+    from charctl.experiments import load
+    exp = load("srb")
+    exp.entry("train")(cfg, run)
 """
 
 from __future__ import annotations
 
 import importlib
-from types import ModuleType
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Protocol
 
 from charctl.errors import CharctlError
 
@@ -25,34 +39,157 @@ EXPERIMENTS: dict[str, str] = {
     "hopper-ga": "charctl.experiments.hopper_ga",
 }
 
+ROLES = ("schema", "train", "evaluate", "export", "play")
 
-def get_experiment(name: str) -> ModuleType:
-    """Import an experiment package by name; unknown or unbuilt ones are one-line errors."""
+
+@dataclass(frozen=True)
+class Option:
+    """One command-line option an experiment adds to `charctl eval` or `charctl export`.
+
+    `kind` is bool (a flag), int, float, str or Path; `nargs` > 1 takes that many values (a tuple).
+    A `mode` option says what to evaluate: `charctl eval` needs at least one mode option.
+    """
+
+    name: str  # Python name; the flag is --name-with-dashes
+    help: str
+    kind: type = bool
+    short: str = ""  # e.g. "-k"
+    nargs: int = 1
+    mode: bool = False
+    metavar: str = ""
+
+    @property
+    def flag(self) -> str:
+        return "--" + self.name.replace("_", "-")
+
+
+@dataclass(frozen=True)
+class Experiment:
+    """What an experiment declares: its name, config schema, entry points and CLI options."""
+
+    name: str
+    summary: str  # one line, shown by `charctl eval --help` and `charctl export --help`
+    schema: str  # "module:Config"
+    train: str  # "module:function"
+    evaluate: str = ""
+    export: str = ""
+    play: str = ""
+    eval_options: tuple[Option, ...] = ()
+    export_options: tuple[Option, ...] = ()
+    provides: Mapping[str, str] = field(default_factory=dict)  # capability -> module implementing it
+    eval_accepts: tuple[str, ...] = ()  # capabilities whose providers' runs `eval` also takes as targets
+
+    def entry(self, role: str) -> Callable[..., Any]:
+        """The callable behind `role` (one of ROLES); a one-line error if the experiment has none."""
+        ref = getattr(self, role, "") if role in ROLES else ""
+        if not ref:
+            raise CharctlError(f"experiment {self.name!r} does not support `{role}`")
+        return _resolve(ref)
+
+    def config_class(self) -> type:
+        """The structured config dataclass."""
+        return self.entry("schema")
+
+    def options(self, command: str) -> tuple[Option, ...]:
+        """The options the experiment adds to `command` ('eval' or 'export')."""
+        return {"eval": self.eval_options, "export": self.export_options}[command]
+
+    def capability(self, name: str) -> Any:
+        """The module implementing capability `name` (see `provides`)."""
+        if name not in self.provides:
+            raise CharctlError(f"experiment {self.name!r} does not provide {name!r}")
+        return importlib.import_module(self.provides[name])
+
+
+class PushRollout(Protocol):
+    """Capability `push_rollout`: a trained full-body policy that can be pushed (srb's baseline)."""
+
+    def make_push_simulator(self, run_dir: str | Path) -> Callable[[Any, int], bool]:
+        """simulate(case, seed) -> survived, for charctl.experiments.srb.push.PushCase cases."""
+
+    def find_baseline_run(self, output_root: Path) -> str:
+        """The newest suitable run under `output_root` (any depth), '' if none."""
+
+    def baseline_label(self, run_dir: str) -> str:
+        """Column label of the run in the push table."""
+
+
+def names() -> list[str]:
+    """The registered experiment names, in registry order."""
+    return list(EXPERIMENTS)
+
+
+def load(name: str) -> Experiment:
+    """The `Experiment` declared by `name`'s package; unknown or unbuilt ones are one-line errors."""
     if name not in EXPERIMENTS:
         raise CharctlError(f"unknown experiment {name!r}; choose one of: {', '.join(sorted(EXPERIMENTS))}")
+    package = EXPERIMENTS[name]
     try:
-        return importlib.import_module(EXPERIMENTS[name])
+        module = importlib.import_module(package)
     except ModuleNotFoundError as exc:
-        if exc.name and exc.name.startswith(EXPERIMENTS[name]):
+        if exc.name and exc.name.startswith(package):
             raise CharctlError(f"experiment {name!r} is not implemented in this version of charctl") from None
         raise
+    exp = getattr(module, "EXPERIMENT", None)
+    if not isinstance(exp, Experiment) or exp.name != name:
+        raise CharctlError(f"{package} declares no EXPERIMENT = Experiment(name={name!r}, ...)")
+    return exp
 
 
-def entry(name: str, func: str):
-    """The function `func` of experiment `name`, or a one-line error if it does not provide it."""
-    mod = get_experiment(name)
-    fn = getattr(mod, func, None)
-    if isinstance(fn, ModuleType):
-        # a submodule named like the entry point (e.g. train.py) shadows the function once it is
-        # imported; fall back to the function of the same name inside that submodule
-        fn = getattr(fn, func, None)
-    if fn is None:
-        raise CharctlError(f"experiment {name!r} does not support `{func}`")
-    return fn
+def providers(capability: str) -> list[Experiment]:
+    """Every registered experiment that provides `capability`."""
+    return [exp for exp in map(load, EXPERIMENTS) if capability in exp.provides]
 
 
-def unsupported_options(name: str, options: dict, supported: set[str]) -> None:
-    """Raise a one-line error if `options` holds flags the experiment does not implement."""
-    extra = sorted(k for k, v in options.items() if v not in (None, False) and k not in supported)
+def experiment_of(target: str | Path) -> Experiment:
+    """The experiment named by `target`, or the one that made the run directory `target`."""
+    from charctl.runs import run_experiment
+
+    if str(target) in EXPERIMENTS:
+        return load(str(target))
+    if Path(target).is_dir():
+        return load(run_experiment(target))
+    raise CharctlError(
+        f"{str(target)!r} is neither a run directory nor an experiment ({', '.join(sorted(EXPERIMENTS))})"
+    )
+
+
+def latest_run_dir(name: str, overrides: Sequence[str] = ()) -> Path:
+    """The newest run of `name` with a checkpoint under its configured `output_root`."""
+    from charctl.config import compose_config
+    from charctl.runs import latest_run
+
+    cfg = compose_config(name, list(overrides), load(name).config_class())
+    return latest_run(str(cfg.output_root), name)
+
+
+def select_options(exp: Experiment, command: str, options: Mapping[str, Any]) -> dict[str, Any]:
+    """The options `exp` declares for `command`, taken from `options`; a one-line error names any
+    other option that was given (a value other than None / False)."""
+    declared = {o.name for o in exp.options(command)}
+    extra = sorted(k for k, v in options.items() if v not in (None, False) and k not in declared)
     if extra:
-        raise CharctlError(f"{name} does not support {', '.join('--' + e.replace('_', '-') for e in extra)}; it supports {', '.join('--' + s.replace('_', '-') for s in sorted(supported))}")
+        given = ", ".join(_flag(e) for e in extra)
+        supported = ", ".join(o.flag for o in exp.options(command))
+        raise CharctlError(f"{exp.name} does not support {given}; it supports {supported}")
+    return {
+        o.name: options.get(o.name, False if o.kind is bool and o.nargs == 1 else None) for o in exp.options(command)
+    }
+
+
+def _flag(name: str) -> str:
+    return "--" + name.replace("_", "-")
+
+
+def _resolve(ref: str) -> Any:
+    module, _, attr = ref.partition(":")
+    return getattr(importlib.import_module(module), attr)
+
+
+# ---------------------------------------------------------------------------- options several experiments share
+OUT = Option("out", "folder for tables and figures (default: inside the run)", Path, short="-o")
+EPISODES = Option("episodes", "episodes/trials per case", int, short="-k")
+BVH = Option("bvh", "write a BVH of the policy/generated motion", Path)
+VIDEO = Option("video", "write an mp4 of the policy/generated motion", Path)
+SECONDS = Option("seconds", "length of a generated rollout", float)
+FPS = Option("fps", "resample to this frame rate", float)

@@ -49,7 +49,7 @@ class Clip:
     def times(self) -> np.ndarray:
         return np.arange(self.num_frames) / self.fps
 
-    def replace(self, **changes) -> "Clip":
+    def replace(self, **changes) -> Clip:
         return dataclasses.replace(self, **changes)
 
     # ------------------------------------------------------------------ kinematics
@@ -100,7 +100,7 @@ class Clip:
         return _pad_differences(fwd)
 
     # ------------------------------------------------------------------ transforms
-    def resample(self, fps: float) -> "Clip":
+    def resample(self, fps: float) -> Clip:
         """Resample to `fps` (positions linear, rotations slerp); duration and end poses kept.
 
         The new frame count is round(duration * fps) + 1 and the last frame lands exactly on
@@ -115,7 +115,7 @@ class Clip:
         new_fps = (n_new - 1) / self.duration if self.duration > 0 else fps
         return self.replace(fps=new_fps, root_pos=pos, local_rot=rot)
 
-    def mirror(self) -> "Clip":
+    def mirror(self) -> Clip:
         """Left/right mirror through the character's sagittal plane (world z -> -z)."""
         perm = self.skeleton.mirror_perm
         pos = self.root_pos * np.array([1.0, 1.0, -1.0])
@@ -123,10 +123,10 @@ class Clip:
         name = self.name[:-7] if self.name.endswith(":mirror") else self.name + ":mirror"
         return self.replace(name=name, root_pos=pos, local_rot=rot)
 
-    def slice(self, start: int, stop: int) -> "Clip":
+    def slice(self, start: int, stop: int) -> Clip:
         return self.replace(root_pos=self.root_pos[start:stop], local_rot=self.local_rot[start:stop], loop=False)
 
-    def canonicalize(self, frame: int = 0, facing: str = "+x") -> "Clip":
+    def canonicalize(self, frame: int = 0, facing: str = "+x") -> Clip:
         """Move frame `frame`'s root to the origin on the ground plane and turn it to face `facing`.
 
         `facing` is "+x" (DeepMimic) or "+z" (com-cnn's convention). Height is kept.
@@ -138,13 +138,6 @@ class Clip:
         rot = self.local_rot.copy()
         rot[:, 0] = R.multiply(np.broadcast_to(turn, (self.num_frames, 4)), rot[:, 0])
         return self.replace(root_pos=pos, local_rot=rot)
-
-    # ------------------------------------------------------------------ DeepMimic frame vectors
-    def to_deepmimic_frames(self) -> np.ndarray:
-        """(T, 44) DeepMimic frames: dt, root pos, root quat wxyz, joints (quat wxyz or hinge angle)."""
-        from charctl.motion.deepmimic import encode_frames
-
-        return encode_frames(self)
 
 
 def finite_difference(x: np.ndarray, dt: float) -> np.ndarray:

@@ -126,7 +126,24 @@ def read_deepmimic(path: str | Path, name: str | None = None, label: str = "") -
         raise CharctlError(f"{path}: frame {bad} contains NaN or infinite values")
     if np.any(frames[:, 0] < 0):
         raise CharctlError(f"{path}: negative frame duration in frame {int(np.argmax(frames[:, 0] < 0))}")
+    zero = _zero_quaternion(frames)
+    if zero is not None:
+        frame, col, joint = zero
+        raise CharctlError(f"{path}: frame {frame}, columns {col}-{col + 3} ({joint} quaternion w-x-y-z) are all zero; "
+                           "a rotation quaternion must have a non-zero length")
     return decode_frames(frames, name or path.stem, loop=loop == "wrap", label=label, source=str(path))
+
+
+def _zero_quaternion(frames: np.ndarray) -> tuple[int, int, str] | None:
+    """(frame, first column, joint) of the first quaternion of length ~0 (it has no rotation), or None."""
+    for joint, col, width in [("root", 4, 4), *LAYOUT]:
+        if width != 4:
+            continue
+        norm = np.linalg.norm(frames[:, col : col + 4], axis=1)
+        bad = np.flatnonzero(norm < 1e-8)
+        if bad.size:
+            return int(bad[0]), col, joint
+    return None
 
 
 def write_deepmimic(clip: Clip, path: str | Path) -> None:

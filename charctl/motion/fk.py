@@ -37,11 +37,6 @@ def forward_kinematics(
     return pos, rot
 
 
-def body_com_positions(skel: Skeleton, pos: np.ndarray, rot: np.ndarray) -> np.ndarray:
-    """World position (..., B, 3) of each body's centre of mass."""
-    return pos + R.rotate(rot, np.broadcast_to(skel.com_local, rot.shape[:-1] + (3,)))
-
-
 def center_of_mass(
     skel: Skeleton, pos: np.ndarray, rot: np.ndarray, masses: np.ndarray | None = None,
     com_local: np.ndarray | None = None,

@@ -75,9 +75,23 @@ def load_clip(spec: str) -> Clip:
     return clip.mirror() if mirror else clip
 
 
+def canonical_name(spec: str) -> str:
+    """The catalogue name of `spec`, accepting DeepMimic's own file stems as aliases:
+    `humanoid3d_walk` (or `humanoid3d_walk.txt`) -> `walk`, `walker/0walk_forward` -> `walker/walk_forward`."""
+    if spec in _CATALOGUE:
+        return spec
+    stem = spec[: -len(".txt")] if spec.endswith(".txt") else spec
+    for name, (file, _) in _CATALOGUE.items():
+        if stem == file[: -len(".txt")]:
+            return name
+    return spec
+
+
 def _load_base(spec: str) -> Clip:
     from charctl.motion.deepmimic import read_deepmimic
 
+    if not Path(spec).exists():
+        spec = canonical_name(spec)
     if spec in _CATALOGUE:
         file, label = _CATALOGUE[spec]
         return read_deepmimic(motions_dir() / file, name=spec, label=label)
@@ -88,6 +102,8 @@ def _load_base(spec: str) -> Clip:
         return read_bvh_as_clip(path)
     if path.suffix or "/" in spec or path.exists():
         return read_deepmimic(path)
-    close = difflib.get_close_matches(spec, clip_names(), n=3)
+    stems = {file[: -len(".txt")]: name for name, (file, _) in _CATALOGUE.items()}
+    close = difflib.get_close_matches(spec, clip_names() + list(stems), n=3)
+    close = list(dict.fromkeys(stems.get(c, c) for c in close))
     hint = f" (did you mean {', '.join(close)}?)" if close else ""
     raise CharctlError(f"unknown clip {spec!r}{hint}; known clips: {', '.join(clip_names())}")

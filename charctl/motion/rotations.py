@@ -15,6 +15,8 @@ from __future__ import annotations
 import numpy as np
 
 IDENTITY = np.array([0.0, 0.0, 0.0, 1.0])
+X_AXIS = np.array([1.0, 0.0, 0.0])  # DeepMimic's forward axis (read-only default)
+X_AXIS.flags.writeable = False
 
 
 def wxyz_to_xyzw(q: np.ndarray) -> np.ndarray:
@@ -124,7 +126,7 @@ def slerp(a: np.ndarray, b: np.ndarray, t: np.ndarray) -> np.ndarray:
     return normalize(wa * a + wb * b)
 
 
-def yaw_about_y(q: np.ndarray, forward: np.ndarray = np.array([1.0, 0.0, 0.0])) -> np.ndarray:
+def yaw_about_y(q: np.ndarray, forward: np.ndarray = X_AXIS) -> np.ndarray:
     """Heading angle (radians) about the world +y axis of the body's `forward` axis.
 
     A rotation Ry(theta) maps +x to (cos theta, 0, -sin theta), so theta = atan2(-f_z, f_x).

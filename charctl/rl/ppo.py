@@ -88,10 +88,10 @@ class PPO:
         data = storage.flat()
         n = data["obs"].shape[0]
         mb = min(cfg.minibatch_size, n)
-        sums: dict[str, float] = {}
+        sums: dict[str, torch.Tensor] = {}  # float64 on the data's device: no host read per minibatch
         steps = 0
         for _ in range(cfg.epochs):
-            perm = torch.randperm(n, generator=self.generator)
+            perm = torch.randperm(n, generator=self.generator).to(data["obs"].device)
             for start in range(0, n - mb + 1, mb):
                 idx = perm[start : start + mb]
                 obs, cond = data["obs"][idx], data["cond"][idx] if self.model.cond_dim else None
@@ -109,9 +109,9 @@ class PPO:
                 nn.utils.clip_grad_norm_(self.model.parameters(), cfg.max_grad_norm)
                 self.optimizer.step()
                 for k, v in {**losses, "entropy": entropy}.items():
-                    sums[k] = sums.get(k, 0.0) + float(v.detach())
+                    sums[k] = sums.get(k, 0.0) + v.detach().double()
                 steps += 1
-        return {f"losses/{k}": v / max(steps, 1) for k, v in sums.items()}
+        return {f"losses/{k}": float(v) / max(steps, 1) for k, v in sums.items()}
 
     def state_dict(self) -> dict:
         return {"model": self.model.state_dict(), "optimizer": self.optimizer.state_dict()}

@@ -25,6 +25,7 @@ from typing import Protocol
 import torch
 
 from charctl.errors import CharctlError
+from charctl.guard import BlowupMonitor, check_finite
 
 
 class Learner(Protocol):
@@ -63,29 +64,20 @@ class RunnerSettings:
     checkpoint_every: int = 10  # iterations
     log_every: int = 1  # iterations
     description: str = "training"
+    blowup_threshold: float = 0.01  # simulator resets per sample above which a sustained rate is warned
+    blowup_window: int = 10  # iterations the rate must stay above the threshold
 
 
-def first_non_finite(stats: dict[str, float], modules: list[torch.nn.Module]) -> str | None:
-    """Name of the first non-finite statistic or parameter, or None when everything is finite."""
-    for key, value in stats.items():
-        if isinstance(value, float) and not math.isfinite(value):
-            return f"{key} = {value}"
-    for module in modules:
-        for name, p in module.named_parameters():
-            if not bool(torch.isfinite(p).all()):
-                return f"parameter {type(module).__name__}.{name}"
-    return None
-
-
-def _interrupted(run, iteration: int, signum: int | None) -> Exception:
-    """The exception ending an interrupted run (exit code 130 for SIGINT, 143 for SIGTERM)."""
-    import charctl.errors as errors
-
-    message = f"interrupted at iteration {iteration}: checkpoint written; continue with --resume {run.dir}"
-    cls = getattr(errors, "Interrupted", None)
-    if cls is None:  # pragma: no cover - older errors module
-        return KeyboardInterrupt(message)
-    return cls(message, signum=signum) if "signum" in cls.__init__.__code__.co_varnames else cls(message)
+def _stop_if_diverged(learner: Learner, run, stats: dict[str, float]) -> None:
+    """Raise `Diverged` (before any checkpoint of this iteration is written) on a NaN/inf."""
+    try:
+        check_finite(stats, *learner.modules(), where=f"iteration {learner.iteration}", checkpoint=run.checkpoint_path)
+    except CharctlError as exc:
+        run.log_scalars({k: v for k, v in stats.items() if math.isfinite(v)}, learner.samples)
+        run.write_metrics({"diverged": True, "error": str(exc), "iterations": learner.iteration,
+                           "samples": learner.samples})
+        run.close()
+        raise
 
 
 def run_on_policy(learner: Learner, run, settings: RunnerSettings) -> dict:
@@ -101,31 +93,33 @@ def run_on_policy(learner: Learner, run, settings: RunnerSettings) -> dict:
             f"{run.dir} already reached train.total_samples={total}; raise it to continue (train.total_samples=...)"
         )
     samples_at_start, stats = learner.samples, {}
+    blowups = BlowupMonitor(settings.blowup_threshold, settings.blowup_window)
     t_start = time.perf_counter()
     with StopFlag() as stop, TrainingProgress(total, settings.description) as bar:
-        bar.update(learner.samples)
+        bar.resume_at(learner.samples)
         while learner.samples < total:
             stats = learner.iterate()
             learner.iteration += 1
             learner.samples += learner.samples_per_iteration
-            bad = first_non_finite(stats, learner.modules())
-            if bad is not None:
-                run.log_scalars({k: v for k, v in stats.items() if math.isfinite(v)}, learner.samples)
-                run.close()
-                raise CharctlError(
-                    f"training diverged at iteration {learner.iteration} ({bad}); the last finite checkpoint "
-                    f"{run.checkpoint_path} was kept; lower the learning rates and start again"
-                )
+            _stop_if_diverged(learner, run, stats)
+            warning = blowups.update(stats.get("sim/unstable_resets", 0.0), learner.samples_per_iteration)
+            stats["sim/blowup_rate"] = blowups.rate
+            if warning:
+                print(f"\n{warning}", flush=True)
             if learner.iteration % settings.log_every == 0:
                 run.log_scalars(stats, learner.samples)
-            bar.update(learner.samples_per_iteration, **learner.progress_fields(stats))
+            fields = learner.progress_fields(stats)
+            if blowups.active:
+                fields["BLOWUPS"] = f"{100 * blowups.rate:.1f}%"
+            bar.update(learner.samples_per_iteration, **fields)
             if learner.iteration % settings.checkpoint_every == 0 or stop.requested:
                 run.save_checkpoint(learner.state_dict(), learner.signature())
             if stop.requested:
                 break
     if stop.requested:
         run.close()
-        raise _interrupted(run, learner.iteration, getattr(stop, "signum", None))
+        message = f"interrupted at iteration {learner.iteration}: checkpoint written; continue with --resume {run.dir}"
+        raise stop.interrupted(message)
     run.save_checkpoint(learner.state_dict(), learner.signature())
     wall = time.perf_counter() - t_start
     metrics = {

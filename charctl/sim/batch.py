@@ -12,12 +12,13 @@ function, default: the model's rest pose) and counted in `unstable_count`.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable
 
 import numpy as np
 
 from charctl.motion.skeleton import FEET, load_skeleton
+from charctl.sim import CONTROL_HZ, PHYSICS_HZ
 from charctl.sim.humanoid import layout, load_model
 
 
@@ -25,8 +26,8 @@ from charctl.sim.humanoid import layout, load_model
 class SimSettings:
     """Rates and safety limits of the batched simulator."""
 
-    physics_hz: float = 300.0  # MuJoCo timestep; 120 Hz blows up, 240+ stable (bench_sim.py --sweep, README)
-    control_hz: float = 30.0  # policy rate; PD targets held for physics_hz/control_hz substeps
+    physics_hz: float = PHYSICS_HZ  # MuJoCo step rate (charctl.sim.PHYSICS_HZ)
+    control_hz: float = CONTROL_HZ  # policy rate; PD targets held for physics_hz/control_hz substeps
     nthread: int = 0  # worker threads (0 = all CPUs)
     max_speed: float = 200.0  # |qvel| above this (m/s, rad/s) counts as a blow-up
     friction: float = 1.0
@@ -78,10 +79,6 @@ class BatchedHumanoid:
         self.ctrl[ids] = qpos[:, 7:]
         self.batch.forward(ids, stage=self._stage_vel)
 
-    def reset_to_rest(self, ids: np.ndarray) -> None:
-        ids = np.asarray(ids, dtype=np.int64)
-        self.batch.reset(ids)
-
     # ------------------------------------------------------------------ stepping
     def step(self, targets: np.ndarray, force: np.ndarray | None = None, force_substeps: int = 0) -> np.ndarray:
         """Hold PD `targets` (N, nu) radians for one control step; returns the mask of envs that
@@ -121,9 +118,7 @@ class BatchedHumanoid:
 
     def _diverged_by_warnings(self) -> np.ndarray:
         """MuJoCo's own bad-qacc/qpos/qvel resets show up as rising warning counters."""
-        w = np.asarray(self.batch.warning)
-        if w.ndim != 3:
-            return np.zeros(self.num_envs, dtype=bool)
+        w = np.asarray(self.batch.warning)  # (N, mjNWARNING, 2)
         import mujoco
 
         cols = [int(mujoco.mjtWarning.mjWARN_BADQACC), int(mujoco.mjtWarning.mjWARN_BADQPOS), int(mujoco.mjtWarning.mjWARN_BADQVEL)]

@@ -22,7 +22,8 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from charctl.motion import rotations as R
-from charctl.motion.skeleton import BODY_NAMES, HINGE_JOINTS, Skeleton, load_skeleton
+from charctl.motion.skeleton import HINGE_JOINTS, Skeleton, load_skeleton
+from charctl.sim import PHYSICS_HZ
 from charctl.sim.scene import scene_assets, scene_ground
 
 # Intrinsic Euler order of each ball joint's hinge chain (R = R_a1 R_a2 R_a3). Chosen by the
@@ -76,7 +77,7 @@ def layout() -> HumanoidLayout:
 
 
 def build_mjcf(
-    physics_hz: float = 600.0,
+    physics_hz: float = PHYSICS_HZ,
     friction: float = 1.0,
     armature: float = 0.01,
     skeleton: Skeleton | None = None,
@@ -100,9 +101,9 @@ def build_mjcf(
         if g.kind == "capsule":
             r, half = g.size
             a, c = p + [0, half, 0], p - [0, half, 0]
-            return f'<geom type="capsule" size="{r:.5f}" fromto="{a[0]:.5f} {a[1]:.5f} {a[2]:.5f} {c[0]:.5f} {c[1]:.5f} {c[2]:.5f}" {common}/>'
+            return f'<geom type="capsule" size="{r:.5f}" ' f'fromto="{a[0]:.5f} {a[1]:.5f} {a[2]:.5f} {c[0]:.5f} {c[1]:.5f} {c[2]:.5f}" {common}/>'
         h = g.size
-        return f'<geom type="box" size="{h[0]:.5f} {h[1]:.5f} {h[2]:.5f}" pos="{p[0]:.5f} {p[1]:.5f} {p[2]:.5f}" {common}/>'
+        return f'<geom type="box" size="{h[0]:.5f} {h[1]:.5f} {h[2]:.5f}" ' f'pos="{p[0]:.5f} {p[1]:.5f} {p[2]:.5f}" {common}/>'
 
     def emit(b: int, depth: int) -> None:
         name = skel.names[b]
@@ -111,8 +112,8 @@ def build_mjcf(
         lines.append(f'{pad}<body name="{name}" pos="{off[0]:.6f} {off[1]:.6f} {off[2]:.6f}">')
         if b == 0:
             lines.append(f'{pad}  <freejoint name="root"/>')
-            lines.append(f'{pad}  <camera name="side" mode="trackcom" pos="0 0.3 4.0" xyaxes="1 0 0 0 0.995 -0.1"/>')
-            lines.append(f'{pad}  <camera name="front" mode="trackcom" pos="4.0 0.3 0" xyaxes="0 0 -1 -0.1 0.995 0"/>')
+            lines.append(f'{pad}  <camera name="side" mode="trackcom" pos="0 0.35 2.8" xyaxes="1 0 0 0 0.99 -0.14"/>')
+            lines.append(f'{pad}  <camera name="front" mode="trackcom" pos="2.8 0.35 0" xyaxes="0 0 -1 -0.14 0.99 0"/>')
         elif not name.endswith("wrist"):
             kp, kd, lim = PD_GAINS[_kind(name)]
             if name in HINGE_JOINTS:
@@ -156,7 +157,7 @@ def build_mjcf(
 
 
 def _actuator(joint: str, kp: float, kd: float, limit: float) -> str:
-    return f'<position name="{joint}" joint="{joint}" kp="{kp}" kv="{kd}" forcelimited="true" forcerange="{-limit} {limit}"/>'
+    return f'<position name="{joint}" joint="{joint}" kp="{kp}" kv="{kd}" ' f'forcelimited="true" forcerange="{-limit} {limit}"/>'
 
 
 def _color(name: str) -> str:
@@ -168,10 +169,13 @@ def _color(name: str) -> str:
 
 
 @functools.lru_cache(maxsize=8)
-def load_model(physics_hz: float = 600.0, friction: float = 1.0, armature: float = 0.01):
+def load_model(physics_hz: float = PHYSICS_HZ, friction: float = 1.0, armature: float = 0.01):
     """Compiled MjModel (cached per settings). Heavy import inside."""
     import mujoco
 
+    from charctl.runs import apply_mujoco_log
+
+    apply_mujoco_log()  # warnings into the run's mujoco.log, never ./MUJOCO_LOG.TXT
     return mujoco.MjModel.from_xml_string(build_mjcf(physics_hz, friction, armature))
 
 

@@ -9,8 +9,8 @@ from __future__ import annotations
 
 import os
 import time
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 
@@ -44,15 +44,40 @@ def write_video(frames: list[np.ndarray], path: str | Path, fps: float) -> Path:
     import imageio.v2 as imageio
 
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
     if not frames:
         raise CharctlError("no frames to write")
     tmp = path.with_name(path.stem + ".tmp" + path.suffix)
-    with imageio.get_writer(tmp, fps=float(fps), codec="libx264", quality=7, macro_block_size=8) as w:
-        for f in frames:
-            w.append_data(np.asarray(f, dtype=np.uint8))
-    os.replace(tmp, path)
+    from charctl.runs import check_output_file
+
+    check_output_file(path, "video")
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        with imageio.get_writer(tmp, fps=float(fps), codec="libx264", quality=7, macro_block_size=8,
+                                ffmpeg_log_level="quiet") as w:
+            for f in frames:
+                w.append_data(np.asarray(f, dtype=np.uint8))
+        if not tmp.is_file() or tmp.stat().st_size == 0:  # ffmpeg died without an error imageio noticed
+            raise RuntimeError(f"{_ffmpeg_exe()} wrote no video")
+        os.replace(tmp, path)
+    except Exception as exc:  # ffmpeg missing or failing, a read-only folder, a full disk ...
+        if tmp.exists():
+            tmp.unlink()
+        if isinstance(exc, OSError) and exc.strerror:
+            cause = exc.strerror
+        else:
+            lines = [ln.strip() for ln in str(exc).strip().splitlines() if ln.strip()]
+            cause = f"ffmpeg failed: {(lines[0] if lines else type(exc).__name__)[:160]}"
+        raise CharctlError(f"cannot write video {path}: {cause}") from None
     return path
+
+
+def _ffmpeg_exe() -> str:
+    try:
+        import imageio_ffmpeg
+
+        return imageio_ffmpeg.get_ffmpeg_exe()
+    except Exception:  # noqa: BLE001
+        return "ffmpeg"
 
 
 def render_qpos(

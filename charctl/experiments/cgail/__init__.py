@@ -1,36 +1,42 @@
-"""cgail: one MuJoCo humanoid policy, many skills switched by a user command (SPEC §1).
+"""cgail: one MuJoCo humanoid policy, many skills switched by a user command.
 
-Light entry points only; the work happens in the submodules (imported on use).
+Declaration only (no torch/mujoco import); the work happens in the submodules, loaded on use.
 """
 
 from __future__ import annotations
 
+from pathlib import Path
 
-def schema() -> type:
-    from charctl.experiments.cgail.config import Config
+from charctl.experiments import BVH, EPISODES, OUT, SECONDS, VIDEO, Experiment, Option
 
-    return Config
+_PKG = "charctl.experiments.cgail"
 
-
-def train(cfg, run) -> dict:
-    from charctl.experiments.cgail.train import train as _train
-
-    return _train(cfg, run)
-
-
-def evaluate(targets, options, overrides) -> None:
-    from charctl.experiments.cgail.evaluate import evaluate as _evaluate
-
-    _evaluate(targets, options, overrides)
-
-
-def export(target, options, overrides) -> None:
-    from charctl.experiments.cgail.export import export as _export
-
-    _export(target, options, overrides)
-
-
-def play(run_dir) -> None:
-    from charctl.experiments.cgail.export import play as _play
-
-    _play(run_dir)
+EXPERIMENT = Experiment(
+    name="cgail",
+    summary="conditional adversarial imitation: one humanoid policy, skills switched by command",
+    schema=f"{_PKG}.config:Config",
+    train=f"{_PKG}.train:train",
+    evaluate=f"{_PKG}.evaluate:evaluate",
+    export=f"{_PKG}.export:export",
+    play=f"{_PKG}.export:play",
+    eval_options=(
+        Option("dtw", "DTW pose error against the reference clips (Table 6.1)", mode=True),
+        Option("confusion", "classifier confusion matrix (Fig 6.8)", mode=True),
+        Option("switch", "command switch study A -> B (Fig 6.10/6.11)", str, nargs=2, mode=True),
+        Option("curves", "training-curve figures from TensorBoard logs", mode=True),
+        Option(
+            "survival", "share of SECONDS-long episodes without a fall, per skill", float, mode=True, metavar="SECONDS"
+        ),
+        EPISODES,
+        OUT,
+    ),
+    export_options=(
+        Option("onnx", "export the policy (normaliser built in) as ONNX", Path),
+        Option("torchscript", "export the policy as TorchScript", Path),
+        BVH,
+        VIDEO,
+        Option("commands", 'command schedule, e.g. "walk:0,run:3,kick:6" (seconds)', str),
+        SECONDS,
+    ),
+    provides={"push_rollout": f"{_PKG}.push"},
+)

@@ -1,5 +1,6 @@
-"""Structured config of the cgail experiment (SPEC §1). Values here are defaults; the paper's
-numbers are set in conf/experiment/cgail.yaml and the scale presets in conf/preset/cgail/."""
+"""Structured config of the cgail experiment (docs/cgail.md). The defaults here are the paper's
+values (each stated once, with its source); conf/preset/cgail/<scale>.yaml state only what a scale
+changes."""
 
 from __future__ import annotations
 
@@ -7,6 +8,7 @@ from dataclasses import dataclass, field
 
 from charctl.config import BaseConfig
 from charctl.rl.config import PPOConfig
+from charctl.sim import CONTROL_HZ, PHYSICS_HZ
 
 
 @dataclass
@@ -18,11 +20,33 @@ class SkillConfig:
     heading_goal: bool = False  # locomotion skills get the heading goal r_G; others r_G = 1
 
 
+def paper_skills() -> list[SkillConfig]:
+    """The paper's 10 skills mapped onto the DeepMimic clips shipped in pybullet (its own mocap is not
+    available; decision, docs/cgail.md): walk, run, jump as themselves; breakdance -> dance_b (no
+    breakdance clip; the most floor-bound dance), spindance -> dance_a, uppercut -> spinkick (no uppercut
+    clip; the remaining fighting move), right punch -> punch (the clip punches with the right hand), left
+    punch -> punch:mirror, right kick -> kick (right leg), left kick -> kick:mirror. backflip and spin are
+    left out of the paper set; add them to `skills` to use them."""
+    locomotion = [SkillConfig(name, name, heading_goal=True) for name in ("walk", "run")]
+    others = [
+        ("jump", "jump"), ("breakdance", "dance_b"), ("spindance", "dance_a"), ("uppercut", "spinkick"),
+        ("left_punch", "punch:mirror"), ("right_punch", "punch"), ("right_kick", "kick"), ("left_kick", "kick:mirror"),
+    ]
+    return locomotion + [SkillConfig(name, clip) for name, clip in others]
+
+
+def paper_ppo() -> PPOConfig:
+    """Paper §5.3: [1024, 512, 512] ReLU policy and value MLPs, fixed diagonal std 0.01 (docs/cgail.md
+    for the measurement), Adam lr 2e-5, gamma 0.95, value loss weight 1; the rest are PPOConfig's
+    defaults (lambda 0.95, clip 0.2, 5 epochs, minibatches of 512, no entropy bonus, grad-norm 1)."""
+    return PPOConfig(hidden=[1024, 512, 512], action_std=0.01, lr=2e-5, gamma=0.95, value_coef=1.0)
+
+
 @dataclass
 class EnvConfig:
     num_envs: int = 64  # humanoids simulated together
-    physics_hz: float = 300.0  # MuJoCo rate (bench_sim.py --sweep: 120 Hz blows up, >= 240 Hz stable)
-    control_hz: float = 30.0  # policy rate (DeepMimic: 30 Hz)
+    physics_hz: float = PHYSICS_HZ  # MuJoCo step rate, charctl.sim.PHYSICS_HZ (DeepMimic uses 1200 Hz)
+    control_hz: float = CONTROL_HZ  # policy rate, charctl.sim.CONTROL_HZ (DeepMimic and the paper: 30 Hz)
     episode_seconds: float = 10.0  # truncation length of an episode
     ramp_frames: int = 60  # eq 4.10-4.11: linear command ramp length (control frames); 0 = switch in one frame
     switch_prob: float = 0.01  # per control step, probability of re-sampling the command within an episode
@@ -30,6 +54,7 @@ class EnvConfig:
     fall_tolerance: float = 0.005  # m: a non-foot body this close to the ground ends the episode (a fall)
     goal_max_angle_deg: float = 45.0  # new heading goals lie within +- this angle of the current heading
     goal_sharpness: float = 2.0  # r_G = exp(-sharpness * (v_target - d . v_xz)^2), v_target = the clip's mean speed
+    backend: str = "cpu"  # cpu (C MuJoCo, numpy) | warp (MuJoCo Warp on `device`, README "GPU") | auto (warp on CUDA)
 
 
 @dataclass
@@ -37,6 +62,7 @@ class RewardConfig:
     w_style: float = 0.5  # w_S, eq 4.1
     w_class: float = 0.5  # w_C, eq 4.1 (ignored when cgail.conditional=false)
     w_goal: float = 0.0  # w_G, eq 4.1 (0 at small scale; the paper adds it for locomotion tasks)
+    class_form: str = "l1"  # r_C: l1 (eq 4.8, zero until P(command) > 0.5) | prob (dense: r_C = P(command))
     kind: str = "adversarial"  # adversarial (eq 4.1) | tracking (DeepMimic-style baseline: phase in the state)
 
 
@@ -65,7 +91,7 @@ class CgailSection:
 
 @dataclass
 class TrainConfig:
-    total_samples: int = 2_000_000  # environment steps over the whole run
+    total_samples: int = 150_000_000  # environment steps over the whole run (paper: 1.5e8 samples)
     rollout_steps: int = 32  # control steps per env per PPO iteration
     checkpoint_every: int = 10  # iterations between checkpoints
     log_every: int = 1
@@ -75,10 +101,10 @@ class TrainConfig:
 @dataclass
 class Config(BaseConfig):
     experiment: str = "cgail"
-    skills: list[SkillConfig] = field(default_factory=lambda: [SkillConfig()])
+    skills: list[SkillConfig] = field(default_factory=paper_skills)
     use_skills: list[str] = field(default_factory=list)  # subset of skill names to train (empty = all), e.g. [walk]
     env: EnvConfig = field(default_factory=EnvConfig)
-    ppo: PPOConfig = field(default_factory=PPOConfig)
+    ppo: PPOConfig = field(default_factory=paper_ppo)
     disc: DiscConfig = field(default_factory=DiscConfig)
     reward: RewardConfig = field(default_factory=RewardConfig)
     cgail: CgailSection = field(default_factory=CgailSection)
@@ -97,6 +123,8 @@ class Config(BaseConfig):
             return f"skill names must be unique, got {names}"
         if cfg.reward.kind not in ("adversarial", "tracking"):
             return f"reward.kind must be 'adversarial' or 'tracking', got {cfg.reward.kind!r}"
+        if cfg.reward.class_form not in ("l1", "prob"):
+            return f"reward.class_form must be 'l1' or 'prob', got {cfg.reward.class_form!r}"
         if cfg.disc.objective not in ("lsgan", "bce"):
             return f"disc.objective must be 'lsgan' or 'bce', got {cfg.disc.objective!r}"
         if cfg.cgail.class_loss not in ("ce", "ls"):
@@ -106,4 +134,11 @@ class Config(BaseConfig):
             return f"env.physics_hz ({cfg.env.physics_hz}) must be a multiple of env.control_hz ({cfg.env.control_hz})"
         if cfg.env.ramp_frames < 0:
             return "env.ramp_frames must be >= 0"
+        if cfg.env.backend not in ("cpu", "warp", "auto"):
+            return f"env.backend must be 'cpu', 'warp' or 'auto', got {cfg.env.backend!r}"
+        if cfg.env.backend == "warp":
+            import importlib.util
+
+            if importlib.util.find_spec("mujoco_warp") is None:
+                return "env.backend=warp needs MuJoCo Warp: pip install -e '.[gpu]' (README, section GPU)"
         return None

@@ -100,36 +100,54 @@ def class_reward(probs: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
     return 1.0 - torch.clamp((probs - target).abs().sum(-1), max=1.0)
 
 
-def blended_class_reward(probs: torch.Tensor, cmd_a: torch.Tensor, cmd_b: torch.Tensor, w: torch.Tensor, num_classes: int) -> torch.Tensor:
-    """Eq 4.11: (1 - w) r_C(c_A) + w r_C(c_B) with one-hot c_A, c_B."""
+def blended_class_reward(
+    probs: torch.Tensor, cmd_a: torch.Tensor, cmd_b: torch.Tensor, w: torch.Tensor, num_classes: int, form: str = "l1"
+) -> torch.Tensor:
+    """Eq 4.11: (1 - w) r_C(c_A) + w r_C(c_B) with one-hot c_A, c_B.
+
+    form ``l1`` is eq 4.8, r_C = 1 - min(1, ||C - c||_1) = max(0, 2 P(c) - 1) for a one-hot c: zero
+    until the classifier gives the command more than half the probability. ``prob`` is the dense
+    variant r_C = P(c), which pays for every step towards the commanded skill (docs/cgail.md, ablation).
+    """
+    if form == "prob":
+        p_a = probs.gather(-1, cmd_a.unsqueeze(-1)).squeeze(-1)
+        p_b = probs.gather(-1, cmd_b.unsqueeze(-1)).squeeze(-1)
+        return (1.0 - w) * p_a + w * p_b
+    if form != "l1":
+        raise ValueError(f"unknown class reward form {form!r}")
     ca = F.one_hot(cmd_a, num_classes).to(probs.dtype)
     cb = F.one_hot(cmd_b, num_classes).to(probs.dtype)
     return (1.0 - w) * class_reward(probs, ca) + w * class_reward(probs, cb)
 
 
 class ReplayBuffer:
-    """Ring buffer of policy pairs and their command blends (for the discriminator's policy half)."""
+    """Ring buffer of policy pairs and their command blends (for the discriminator's policy half).
 
-    def __init__(self, capacity: int, pair_dim: int, num_classes: int):
-        self.pairs = torch.zeros(capacity, pair_dim)
-        self.cond = torch.zeros(capacity, num_classes)
+    Lives on `device` (the learner's); its state dict is always on the CPU, so checkpoints load anywhere."""
+
+    def __init__(self, capacity: int, pair_dim: int, num_classes: int, device: str | torch.device = "cpu"):
+        self.pairs = torch.zeros(capacity, pair_dim, device=device)
+        self.cond = torch.zeros(capacity, num_classes, device=device)
         self.capacity, self.size, self.pos = capacity, 0, 0
 
     def add(self, pairs: torch.Tensor, cond: torch.Tensor) -> None:
         n = pairs.shape[0]
         if n >= self.capacity:
             pairs, cond, n = pairs[-self.capacity :], cond[-self.capacity :], self.capacity
-        idx = (torch.arange(n) + self.pos) % self.capacity
+        idx = (torch.arange(n, device=self.pairs.device) + self.pos) % self.capacity
         self.pairs[idx], self.cond[idx] = pairs, cond
         self.pos = int((self.pos + n) % self.capacity)
         self.size = min(self.capacity, self.size + n)
 
     def sample(self, n: int, generator: torch.Generator | None = None) -> tuple[torch.Tensor, torch.Tensor]:
-        idx = torch.randint(0, max(self.size, 1), (n,), generator=generator)
+        """n stored (pair, blend) rows, uniformly; the indices come from `generator` (a CPU generator)."""
+        idx = torch.randint(0, max(self.size, 1), (n,), generator=generator).to(self.pairs.device)
         return self.pairs[idx], self.cond[idx]
 
     def state_dict(self) -> dict:
-        return {"pairs": self.pairs[: self.size].clone(), "cond": self.cond[: self.size].clone(), "pos": self.pos, "size": self.size}
+        n = self.size
+        return {"pairs": self.pairs[:n].to("cpu", copy=True), "cond": self.cond[:n].to("cpu", copy=True),
+                "pos": self.pos, "size": n}
 
     def load_state_dict(self, s: dict) -> None:
         n = int(s["size"])

@@ -1,4 +1,4 @@
-"""Batched multi-skill imitation environment on the foundation simulator (SPEC §1).
+"""Batched multi-skill imitation environment on the foundation simulator (docs/cgail.md).
 
 Per env: the commanded skill B, the previous one A and the ramp weight w (eq 4.10:
 c̄ = (1 - w) c_A + w c_B, w rising linearly over `ramp_frames`), the step count and, for

@@ -1,4 +1,4 @@
-"""`charctl eval RUN... --dtw --confusion --switch A B --curves` for cgail (SPEC §1, section 6).
+"""`charctl eval RUN... --dtw --confusion --switch A B --curves` for cgail (docs/cgail.md; the paper's chapter 6).
 
 Every mode writes JSON (+ CSV / PNG) into the output folder (default `<first run>/eval/`) and
 appends its table to `report.md` there, with the command that produced it and the paper's
@@ -22,10 +22,7 @@ import torch.nn.functional as F
 from charctl.errors import CharctlError
 from charctl.eval.dtw import dtw_align
 from charctl.eval.pose import pose_error_matrix
-from charctl.experiments import unsupported_options
-from charctl.experiments.cgail.policy import TrainedRun, load_trained_run, local_joint_rotations
-
-SUPPORTED = {"dtw", "confusion", "switch", "curves", "episodes", "out"}
+from charctl.experiments.cgail.policy import TrainedRun, load_trained_run, local_joint_rotations, resolve_run_dirs
 
 # Table 6.1 of the paper: per-motion mean per-frame pose error after DTW (AMP, cGAIL).
 PAPER_TABLE_6_1 = {
@@ -130,6 +127,51 @@ def eval_dtw(runs: list[TrainedRun], episodes: int, out: Path) -> dict:
     return result
 
 
+@torch.no_grad()
+def survival_rollout(tr: TrainedRun, skill: int, episodes: int, seconds: float, seed: int = 0) -> dict:
+    """`episodes` envs held on `skill` for `seconds` (mean actions, RSI at random clip frames and
+    random headings, no command switches). Returns the fraction that never fell and, for cGAIL,
+    the classifier's accuracy on the policy's pairs up to each env's first fall."""
+    env = tr.make_env(episodes, seed=seed, switch_prob=0.0, episode_seconds=seconds + 1.0)
+    env.forced_command = np.full(episodes, skill)
+    env.reset(np.arange(episodes))
+    alive = np.ones(episodes, dtype=bool)
+    hits = total = 0
+    for _ in range(int(round(seconds * env.cfg.control_hz))):
+        o_t = env.obs.copy()
+        res = env.step(tr.mean_action(env))
+        if tr.agent.conditional:
+            pair = torch.as_tensor(np.concatenate([o_t, res.pair_next], axis=1)[alive], dtype=torch.float32)
+            _, logits = tr.agent.disc(pair)
+            hits += int((logits.argmax(-1) == skill).sum())
+            total += int(alive.sum())
+        alive &= ~res.terminated
+    out = {"episodes": episodes, "seconds": seconds, "no_fall": float(alive.mean())}
+    if tr.agent.conditional:
+        out["class_acc_policy"] = hits / max(total, 1)
+    return out
+
+
+def eval_survival(runs: list[TrainedRun], episodes: int, seconds: float, out: Path) -> dict:
+    """Share of episodes without a fall (and classifier accuracy on policy motion) per skill and run."""
+    table: dict[str, dict[str, float]] = {}
+    for tr in runs:
+        for k, s in enumerate(tr.skill_names):
+            r = survival_rollout(tr, k, episodes, seconds, seed=4321)
+            row = table.setdefault(s, {})
+            row[f"{tr.label} no-fall"] = r["no_fall"]
+            if "class_acc_policy" in r:
+                row[f"{tr.label} class acc"] = r["class_acc_policy"]
+    result = {"table": table, "episodes": episodes, "seconds": seconds, "runs": {tr.label: str(tr.run_dir) for tr in runs},
+              "metric": "no-fall: share of episodes without a non-foot ground contact (RSI at random frames and "
+                        "headings, mean actions); class acc: classifier argmax == command on the policy's pairs"}
+    _write_json(out / "survival.json", result)
+    cols = sorted({c for row in table.values() for c in row})
+    _print_table(f"Survival over {seconds:g}-s episodes ({episodes} per skill)", table, cols)
+    _append_report(out, f"Survival — {seconds:g}-s episodes, {episodes} per skill", _markdown_table(table, cols), result["metric"])
+    return result
+
+
 def eval_confusion(tr: TrainedRun, episodes: int, out: Path) -> dict:
     """Fig 6.8: mean classifier probabilities per commanded skill (policy) and per clip (data)."""
     if not tr.agent.conditional:
@@ -164,7 +206,7 @@ def eval_confusion(tr: TrainedRun, episodes: int, out: Path) -> dict:
     rows = {s: {"policy P(correct)": policy[k, k], "data P(correct)": data[k, k]} for k, s in enumerate(tr.skill_names)}
     _print_table("Fig 6.8: classifier confusion (diagonal)", rows, ["policy P(correct)", "data P(correct)"])
     _append_report(out, "Fig 6.8 — classifier confusion diagonal", _markdown_table(rows, ["policy P(correct)", "data P(correct)"]) + "\n\n![confusion](confusion.png)",
-                   "rows: commanded skill (policy) or clip label (data); entries: mean softmax probability; rows sum to 1")
+                   "rows: commanded skill (policy) or clip label (data); " "entries: mean softmax probability; rows sum to 1")
     return result
 
 
@@ -192,7 +234,6 @@ def eval_switch(tr: TrainedRun, a: str, b: str, trials: int, out: Path, before_s
                 env.forced_command = np.full(trials, kb)
                 alive_at_switch = alive.copy()
             o_t = env.obs.copy()
-            blend = env.command_blend()
             cmd_a, cmd_b, w = env.prev_cmd.copy(), env.cmd.copy(), env.w.copy()
             res = env.step(tr.mean_action(env))
             pair = torch.as_tensor(np.concatenate([o_t, res.pair_next], axis=1), dtype=torch.float32)
@@ -200,7 +241,7 @@ def eval_switch(tr: TrainedRun, a: str, b: str, trials: int, out: Path, before_s
             p = F.softmax(logits, -1)
             from charctl.experiments.cgail.discriminator import blended_class_reward, style_reward
 
-            r_c = blended_class_reward(p, torch.from_numpy(cmd_a), torch.from_numpy(cmd_b), torch.from_numpy(w).float(), len(tr.skill_names))
+            r_c = blended_class_reward(p, torch.from_numpy(cmd_a), torch.from_numpy(cmd_b), torch.from_numpy(w).float(), len(tr.skill_names), tr.cfg.reward.class_form)
             probs.append(p.numpy())
             rs.append(style_reward(d, tr.agent.cfg.disc.objective).numpy())
             rc.append(r_c.numpy())
@@ -219,7 +260,7 @@ def eval_switch(tr: TrainedRun, a: str, b: str, trials: int, out: Path, before_s
                          "latency_frames": latency, "never_switched": int(sum(x is None for x in latency)), "falls": falls, "trials": trials}
         with np.errstate(all="ignore"), warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)
-            mean = lambda x: np.nanmean(np.where(live[..., None] if x.ndim == 3 else live, x, np.nan), axis=1)  # noqa: E731
+            mean = lambda x: np.nanmean(np.where(live[..., None] if x.ndim == 3 else live, x, np.nan), axis=1)  # noqa: E731, B023 (used in this iteration)
             curves[name] = {"probs": mean(probs), "r_style": mean(rs), "r_class": mean(rc)}
     _plot_switch(curves, tr.skill_names, ka, kb, t_switch, hz, out / f"switch_{a}_to_{b}.png")
     result = {"from": a, "to": b, "switch_frame": t_switch, "summary": summary, "run": str(tr.run_dir),
@@ -229,7 +270,7 @@ def eval_switch(tr: TrainedRun, a: str, b: str, trials: int, out: Path, before_s
     cols = ["latency (frames, P(B)>0.5)", "never switched", "falls", "alive at switch", "trials"]
     _print_table(f"Fig 6.10/6.11: switch {a} -> {b}", rows, cols)
     _append_report(out, f"Fig 6.10/6.11 — command switch {a} → {b}", _markdown_table(rows, cols) + f"\n\n![switch](switch_{a}_to_{b}.png)",
-                   f"switch at frame {t_switch} ({before_s:.1f} s); ramp = {ramp_frames} frames linear (eq 4.10); latency = frames after the switch until the classifier's P({b}) > 0.5")
+                   f"switch at frame {t_switch} ({before_s:.1f} s); ramp = {ramp_frames} frames linear " f"(eq 4.10); latency = frames after the switch until the classifier's P({b}) > 0.5")
     return result
 
 
@@ -305,24 +346,20 @@ def _smooth(v: np.ndarray, k: int = 5) -> np.ndarray:
 
 # ---------------------------------------------------------------------------- entry point
 def evaluate(targets: list[str], options: dict, overrides: list[str]) -> None:
-    unsupported_options("cgail", options, SUPPORTED)
-    if overrides:
-        raise CharctlError(f"cgail eval takes no config overrides (got {' '.join(overrides)})")
-    if any(t == "cgail" for t in targets):
-        from charctl.runs import latest_run
-
-        targets = [str(latest_run("outputs", "cgail")) if t == "cgail" else t for t in targets]
-    run_dirs = [Path(t) for t in targets]
+    """The modes given in `options` (--dtw, --confusion, --switch, --curves, --survival) over the runs."""
+    run_dirs = resolve_run_dirs(targets, overrides, "eval")
     out = Path(options.get("out") or run_dirs[0] / "eval")
     out.mkdir(parents=True, exist_ok=True)
     _append_report(out, None, None, None, command="charctl eval " + " ".join(shlex.quote(a) for a in sys.argv[2:]) if sys.argv and sys.argv[0].endswith("charctl") else None)
     episodes = int(options.get("episodes") or 4)
     if options.get("curves"):
         eval_curves(run_dirs, out)
-    needs_policy = options.get("dtw") or options.get("confusion") or options.get("switch")
+    needs_policy = options.get("dtw") or options.get("confusion") or options.get("switch") or options.get("survival")
     if not needs_policy:
         return
     runs = [load_trained_run(d) for d in run_dirs]
+    if options.get("survival"):
+        eval_survival(runs, max(episodes, 1), float(options["survival"]), out)
     if options.get("dtw"):
         eval_dtw(runs, episodes, out)
     if options.get("confusion"):
@@ -385,7 +422,7 @@ def _write_json(path: Path, obj) -> None:
 def _append_report(out: Path, title: str | None, body: str | None, note: str | None, command: str | None = None) -> None:
     path = out / "report.md"
     if not path.exists():
-        path.write_text("# cgail evaluation report\n\nPaper values: SPEC §1 / Table 6.1. Produced by charctl.\n")
+        path.write_text("# cgail evaluation report\n\nPaper values: Table 6.1 (docs/cgail.md). Produced by charctl.\n")
     with open(path, "a") as fh:
         if command:
             fh.write(f"\n`{command}`\n")

@@ -15,10 +15,7 @@ import torch
 from torch import nn
 
 from charctl.errors import CharctlError
-from charctl.experiments import unsupported_options
-from charctl.experiments.cgail.policy import TrainedRun, load_trained_run
-
-SUPPORTED = {"onnx", "torchscript", "bvh", "video", "commands", "seconds"}
+from charctl.experiments.cgail.policy import TrainedRun, load_trained_run, resolve_run_dirs
 
 
 class ExportedPolicy(nn.Module):
@@ -78,6 +75,8 @@ def parse_schedule(text: str, names: list[str]) -> list[tuple[float, int]]:
             sec = float(t)
         except ValueError:
             raise CharctlError(f"bad time {t!r} in --commands item {item!r}") from None
+        if not np.isfinite(sec) or sec < 0:
+            raise CharctlError(f"bad time {t!r} in --commands item {item!r}: seconds must be finite and >= 0")
         out.append((sec, names.index(name)))
     return sorted(out)
 
@@ -106,14 +105,12 @@ def schedule_rollout(tr: TrainedRun, schedule: list[tuple[float, int]], seconds:
 
 
 def export(target: str, options: dict, overrides: list[str]) -> None:
-    unsupported_options("cgail", options, SUPPORTED)
-    if overrides:
-        raise CharctlError(f"cgail export takes no config overrides (got {' '.join(overrides)})")
-    if target == "cgail":
-        from charctl.runs import latest_run
-
-        target = str(latest_run("outputs", "cgail"))
-    tr = load_trained_run(target)
+    """--onnx / --torchscript of the policy, --bvh / --video of a commanded rollout (--commands, --seconds)."""
+    (run_dir,) = resolve_run_dirs([target], overrides, "export")
+    tr = load_trained_run(run_dir)
+    # every argument is checked before anything is written (the schedule names the run's skills)
+    names = tr.skill_names
+    schedule = parse_schedule(options.get("commands") or f"{names[0]}:0", names)
     did = False
     if options.get("onnx"):
         print(f"wrote {export_onnx(tr, Path(options['onnx']))}")
@@ -122,9 +119,6 @@ def export(target: str, options: dict, overrides: list[str]) -> None:
         print(f"wrote {export_torchscript(tr, Path(options['torchscript']))}")
         did = True
     if options.get("bvh") or options.get("video"):
-        names = tr.skill_names
-        text = options.get("commands") or f"{names[0]}:0"
-        schedule = parse_schedule(text, names)
         seconds = float(options.get("seconds") or (schedule[-1][0] + 3.0))
         qpos, stats = schedule_rollout(tr, schedule, seconds)
         if options.get("bvh"):
@@ -146,12 +140,54 @@ def export(target: str, options: dict, overrides: list[str]) -> None:
         raise CharctlError("say what to export: --onnx FILE, --torchscript FILE, --bvh FILE or --video FILE")
 
 
+def _display_problem() -> str | None:
+    """Why no viewer window can open here (no DISPLAY, a display that does not answer, no GLFW), or None."""
+    import os
+    import warnings
+
+    display = os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")
+    if not display:
+        return "no display (DISPLAY is not set)"
+    if os.environ.get("MUJOCO_GL", "glfw") != "glfw":
+        return f"MUJOCO_GL={os.environ['MUJOCO_GL']} renders offscreen only"
+    try:
+        import glfw
+    except Exception as exc:  # noqa: BLE001  the glfw package or its library is missing
+        return f"GLFW is not available ({str(exc).splitlines()[0][:80] if str(exc) else type(exc).__name__})"
+    old = getattr(glfw, "ERROR_REPORTING", None)
+    try:
+        glfw.ERROR_REPORTING = "ignore"  # no "GLFWError" warning on stderr: the one-line error says it
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            ok = glfw.init()
+            if ok:
+                glfw.terminate()
+    except Exception:  # noqa: BLE001
+        ok = False
+    finally:
+        glfw.ERROR_REPORTING = old
+    return None if ok else f"cannot open a window on display {display!r} (GLFW could not initialise)"
+
+
+def _record_hint(run_dir) -> str:
+    """`charctl export RUN --video out.mp4 --commands "walk:0,run:3"` with the run's own skills."""
+    names: list[str] = []
+    try:
+        from charctl.runs import read_run_config
+
+        cfg = read_run_config(run_dir)
+        names = [str(n) for n in (cfg.get("use_skills") or [])] or [str(s.name) for s in cfg.get("skills") or []]
+    except Exception:  # noqa: BLE001  the hint is best effort; the run is checked when it is loaded
+        pass
+    schedule = ",".join(f"{n}:{3 * i}" for i, n in enumerate(names[:3])) or "walk:0"
+    return f'charctl export {run_dir} --video out.mp4 --commands "{schedule}"'
+
+
 def play(run_dir) -> None:
     """Interactive viewer: keys 1..9 switch the command (needs a display)."""
-    import os
-
-    if not os.environ.get("DISPLAY") and os.environ.get("MUJOCO_GL", "glfw") != "glfw":
-        raise CharctlError("no display for the interactive viewer; record a rollout instead: charctl export RUN --video out.mp4 --commands \"walk:0,run:3\"")
+    problem = _display_problem()
+    if problem:
+        raise CharctlError(f"{problem}; record a rollout instead: {_record_hint(run_dir)}")
     import time
 
     import mujoco.viewer

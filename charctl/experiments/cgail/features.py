@@ -1,4 +1,4 @@
-"""Policy state s_t and discriminator observation o_t (SPEC §1), from kinematic arrays.
+"""Policy state s_t and discriminator observation o_t (docs/cgail.md, §5.1-5.2), from kinematic arrays.
 
 The same functions serve the simulator (exact velocities from MuJoCo) and the motion clips
 (finite differences), so data and policy samples share one definition. Everything is in the

@@ -70,6 +70,17 @@ def load_trained_run(run_dir: str | Path) -> TrainedRun:
     return TrainedRun(run_dir, run.cfg, agent)
 
 
+def resolve_run_dirs(targets: list[str], overrides: list[str], command: str) -> list[Path]:
+    """Run directories from `targets`; 'cgail' stands for the latest run under the configured
+    output_root. `output_root=DIR` is the only override eval/export take (runs keep their config)."""
+    from charctl.experiments import latest_run_dir
+
+    other = [o for o in overrides if o.split("=", 1)[0] != "output_root"]
+    if other:
+        raise CharctlError(f"cgail {command} takes no config overrides (got {' '.join(other)})")
+    return [latest_run_dir("cgail", overrides) if t == "cgail" else Path(t) for t in targets]
+
+
 def local_joint_rotations(env: CgailEnv) -> np.ndarray:
     """(N, 15, 4) local rotations of the simulated characters (body 0: root world rotation)."""
     from charctl.motion.skeleton import load_skeleton

@@ -8,9 +8,14 @@ substep, so windows shorter than a control step deliver exactly force x duration
 direction `direction_deg` of the heading frame at push onset (0 forward, 90 left), and the
 trial survives if no fall (a non-foot body touching the ground) happens before `observe_s`
 after the window closes. The seed sets the env's random generator only.
+
+This module is cgail's `push_rollout` capability (charctl.experiments.PushRollout), declared in
+the package's EXPERIMENT: the srb push study reaches it through the registry, never by import.
 """
 
 from __future__ import annotations
+
+from pathlib import Path
 
 import numpy as np
 
@@ -59,3 +64,30 @@ def make_push_simulator(run_dir, skill: str = "walk"):
 
     return simulate
 
+
+def find_baseline_run(output_root: Path) -> str:
+    """The latest cgail run under `output_root` (any depth) that is the paper's kind of full-body
+    baseline: AMP mode (cgail.conditional=false), the walk skill only, with a checkpoint; '' if none."""
+    from charctl.runs import read_run_config
+
+    runs = [p.parent for p in Path(output_root).glob("**/cgail/*/config.yaml")]
+    for d in sorted(runs, key=lambda p: p.name, reverse=True):
+        if not (d / "checkpoints" / "last.pt").is_file():
+            continue
+        try:
+            c = read_run_config(d)
+        except CharctlError:
+            continue
+        cg, skills = c.get("cgail") or {}, list(c.get("use_skills") or [])
+        if not cg.get("conditional", True) and skills == ["walk"]:
+            return str(d)
+    return ""
+
+
+def baseline_label(run_dir: str) -> str:
+    """'full body (AMP walk, <run>)' or 'full body (cGAIL walk, <run>)'."""
+    from charctl.runs import read_run_config
+
+    c = read_run_config(run_dir)
+    mode = "cGAIL" if (c.get("cgail") or {}).get("conditional", True) else "AMP"
+    return f"full body ({mode} walk, {Path(run_dir).name})"

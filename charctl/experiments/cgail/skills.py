@@ -75,6 +75,28 @@ class DemoPairs:
     def all(self) -> tuple[np.ndarray, np.ndarray]:
         return np.concatenate(self.pairs), np.concatenate(self.labels)
 
+    def to_device(self, device) -> None:
+        """Copy the pairs to torch `device` as one padded (K, max_pairs, 266) table for `sample_torch`."""
+        import torch
+
+        longest = max(len(p) for p in self.pairs)
+        table = np.zeros((self.num_skills, longest, self.pairs[0].shape[1]), dtype=np.float32)
+        for k, p in enumerate(self.pairs):
+            table[k, : len(p)] = p
+        self._table = torch.as_tensor(table, device=device)
+        self._counts = torch.as_tensor([len(p) for p in self.pairs], dtype=torch.long, device=device)
+
+    def sample_torch(self, n: int, generator):
+        """`sample` on the device (after `to_device`): n pairs, skill uniform, then pair uniform within the
+        skill, drawn with the torch `generator` (on the same device). Returns (pairs (n, 266), labels (n,))."""
+        import torch
+
+        dev = self._table.device
+        k = torch.randint(0, self.num_skills, (n,), generator=generator, device=dev)
+        u = torch.rand(n, generator=generator, device=dev)
+        j = torch.minimum((u * self._counts[k]).long(), self._counts[k] - 1)
+        return self._table[k, j], k
+
     def sample(self, n: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
         """n pairs: skill uniform, then frame uniform within the skill. Returns (pairs, labels)."""
         k = rng.integers(0, self.num_skills, size=n)

@@ -43,6 +43,8 @@ class Agent:
     samples: int = 0
     unstable_total: int = 0
     history: dict = field(default_factory=dict)
+    device: str = "cpu"  # torch device of networks, rollout storage, replay and (off the CPU) demonstration pairs
+    device_generator: torch.Generator | None = None  # off the CPU: draws demonstration pairs on the device
 
     @property
     def conditional(self) -> bool:
@@ -58,8 +60,11 @@ class Agent:
                 "policy_hidden": list(self.cfg.ppo.hidden), "disc_hidden": list(self.cfg.disc.hidden)}
 
 
-def build_agent(cfg) -> Agent:
-    """Networks, optimisers, demonstration data and replay buffer for `cfg` (seeded)."""
+def build_agent(cfg, device: str = "cpu") -> Agent:
+    """Networks, optimisers, demonstration data and replay buffer for `cfg` (seeded), on torch `device`.
+
+    Off the CPU (device=cuda) the demonstration pairs also move to the device and are drawn there
+    (`DemoPairs.sample_torch`); on the CPU everything is as it always was (numpy draws)."""
     torch.manual_seed(cfg.seed)
     skills = load_skills(select_skills(cfg), cfg.env.control_hz, cfg.disc.demo_oversample)
     K = len(skills)
@@ -68,7 +73,7 @@ def build_agent(cfg) -> Agent:
     from charctl.experiments.cgail.features import DISC_OBS_DIM, STATE_DIM
 
     state_dim = STATE_DIM + GOAL_DIM + (PHASE_DIM if cfg.reward.kind == "tracking" else 0)
-    model = ActorCritic(state_dim, 28, cfg.ppo, cond_dim=K if conditional else 0)
+    model = ActorCritic(state_dim, 28, cfg.ppo, cond_dim=K if conditional else 0).to(device)
     gen = torch.Generator().manual_seed(cfg.seed)
     ppo = PPO(model, cfg.ppo, generator=gen)
     disc = Discriminator(2 * DISC_OBS_DIM, K, list(cfg.disc.hidden), conditional=conditional)
@@ -76,9 +81,14 @@ def build_agent(cfg) -> Agent:
     pairs, _ = demos.all()
     with torch.no_grad():
         disc.norm.update(torch.from_numpy(pairs))  # normalise with demonstration statistics (frozen)
+    disc = disc.to(device)
     disc_opt = torch.optim.Adam(discriminator_param_groups(disc, cfg.disc), lr=cfg.disc.lr)
-    replay = ReplayBuffer(cfg.disc.replay_size, 2 * DISC_OBS_DIM, K)
-    return Agent(cfg, skills, model, ppo, disc, disc_opt, demos, replay, gen)
+    replay = ReplayBuffer(cfg.disc.replay_size, 2 * DISC_OBS_DIM, K, device=device)
+    agent = Agent(cfg, skills, model, ppo, disc, disc_opt, demos, replay, gen, device=str(device))
+    if torch.device(device).type != "cpu":
+        demos.to_device(device)
+        agent.device_generator = torch.Generator(device=device).manual_seed(int(cfg.seed) + 104729)
+    return agent
 
 
 def discriminator_param_groups(disc: Discriminator, dcfg) -> list[dict]:
@@ -98,7 +108,9 @@ def agent_state(agent: Agent, env: CgailEnv | None = None) -> dict:
         "unstable_total": agent.unstable_total, "torch_rng": torch.get_rng_state(), "gen_rng": agent.generator.get_state(),
         "skills": [s.name for s in agent.skills], "clips": [s.clip_name for s in agent.skills],
     }
-    if env is not None:
+    if env is not None and getattr(env, "on_device", False):
+        state["env_torch_rng"] = env.generator.get_state()  # device env (env.backend=warp): torch generator
+    elif env is not None:
         state["env_rng"] = env.rng.bit_generator.state
     return state
 
@@ -107,12 +119,16 @@ def load_agent_state(agent: Agent, state: dict, env: CgailEnv | None = None) -> 
     agent.ppo.load_state_dict(state["ppo"])
     agent.disc.load_state_dict(state["disc"])
     agent.disc_opt.load_state_dict(state["disc_opt"])
-    agent.replay.load_state_dict(state["replay"])
+    if "replay" in state:  # shipped (pretrained/) checkpoints leave the replay buffer out
+        agent.replay.load_state_dict(state["replay"])
     agent.iteration, agent.samples = int(state["iteration"]), int(state["samples"])
     agent.unstable_total = int(state.get("unstable_total", 0))
     torch.set_rng_state(state["torch_rng"])
     agent.generator.set_state(state["gen_rng"])
-    if env is not None and "env_rng" in state:
+    if env is not None and getattr(env, "on_device", False):
+        if "env_torch_rng" in state:
+            env.generator.set_state(state["env_torch_rng"])
+    elif env is not None and "env_rng" in state:
         env.rng.bit_generator.state = state["env_rng"]
 
 
@@ -143,6 +159,8 @@ def collect_rollout(agent: Agent, env: CgailEnv, steps: int, deterministic: bool
     threads = torch.get_num_threads()
     torch.set_num_threads(1)
     try:
+        if getattr(env, "on_device", False):  # env.backend=warp: everything stays on the device
+            return _collect_rollout_device(agent, env, steps, deterministic)
         return _collect_rollout(agent, env, steps, deterministic)
     finally:
         torch.set_num_threads(threads)
@@ -150,41 +168,93 @@ def collect_rollout(agent: Agent, env: CgailEnv, steps: int, deterministic: bool
 
 def _collect_rollout(agent: Agent, env: CgailEnv, steps: int, deterministic: bool) -> Rollout:
     N, K = env.N, agent.num_skills
-    storage = RolloutStorage(steps, N, env.state_dim, 28, K if agent.conditional else 0)
-    pairs = torch.zeros(steps, N, agent.disc.norm.mean.shape[0])
-    cond_all = torch.zeros(steps, N, K)
-    cmd_a = torch.zeros(steps, N, dtype=torch.long)
-    cmd_b = torch.zeros(steps, N, dtype=torch.long)
-    w = torch.zeros(steps, N)
-    r_goal = torch.zeros(steps, N)
-    r_track = torch.zeros(steps, N)
-    bootstrap = torch.zeros(steps, N)
+    dev = torch.device(agent.device)  # the CPU env's numpy arrays go to the learner's device (no-op on the CPU)
+    storage = RolloutStorage(steps, N, env.state_dim, 28, K if agent.conditional else 0, device=dev)
+    pairs = torch.zeros(steps, N, agent.disc.norm.mean.shape[0], device=dev)
+    cond_all = torch.zeros(steps, N, K, device=dev)
+    cmd_a = torch.zeros(steps, N, dtype=torch.long, device=dev)
+    cmd_b = torch.zeros(steps, N, dtype=torch.long, device=dev)
+    w = torch.zeros(steps, N, device=dev)
+    r_goal = torch.zeros(steps, N, device=dev)
+    r_track = torch.zeros(steps, N, device=dev)
+    bootstrap = torch.zeros(steps, N, device=dev)
     lengths = []
     unstable = falls = 0
     for t in range(steps):
-        obs = torch.as_tensor(env.state, dtype=torch.float32)
-        blend = torch.as_tensor(env.command_blend(), dtype=torch.float32)
+        obs = torch.as_tensor(env.state, dtype=torch.float32, device=dev)
+        blend = torch.as_tensor(env.command_blend(), dtype=torch.float32, device=dev)
         cond = blend if agent.conditional else None
         action, logp, value = agent.model.act(obs, cond, deterministic=deterministic)
         o_t = env.obs.copy()
         cmd_a[t], cmd_b[t], w[t], cond_all[t] = torch.from_numpy(env.prev_cmd), torch.from_numpy(env.cmd), torch.from_numpy(env.w), blend
         steps_before = env.steps.copy()
-        res = env.step(action.numpy().astype(np.float64))
+        res = env.step(action.cpu().numpy().astype(np.float64))
         pairs[t] = torch.from_numpy(np.concatenate([o_t, res.pair_next], axis=1))
         r_goal[t] = torch.from_numpy(res.r_goal)
         r_track[t] = torch.from_numpy(res.r_track)
         done = res.terminated | res.truncated
         if res.truncated.any():
             idx = np.flatnonzero(res.truncated)
-            fs = torch.as_tensor(res.final_state[idx], dtype=torch.float32)
+            fs = torch.as_tensor(res.final_state[idx], dtype=torch.float32, device=dev)
             with torch.no_grad():
                 v_final = agent.model.value(fs, blend[idx] if agent.conditional else None)
-            bootstrap[t, idx] = agent.cfg.ppo.gamma * v_final
-        storage.add(obs, blend if agent.conditional else None, action, logp, value, torch.zeros(N), torch.from_numpy(done))
+            bootstrap[t, torch.as_tensor(idx, device=dev)] = agent.cfg.ppo.gamma * v_final
+        storage.add(obs, blend if agent.conditional else None, action, logp, value, torch.zeros(N, device=dev),
+                    torch.from_numpy(done).to(dev))
         lengths += list(steps_before[done] + 1)
         unstable += int(res.unstable.sum())
         falls += int((res.terminated & ~res.unstable).sum())
     return Rollout(storage, pairs, cond_all, cmd_a, cmd_b, w, r_goal, r_track, bootstrap, lengths, unstable, falls)
+
+
+def _collect_rollout_device(agent: Agent, env, steps: int, deterministic: bool) -> Rollout:
+    """`_collect_rollout` for the device env (`CgailDeviceEnv`, env.backend=warp): every buffer lives on
+    the env's device and the loop never reads a value back to the host. Truncated envs' final states
+    are kept and bootstrapped with one critic forward after the loop (same parameters as during the
+    loop, so the same values); episode lengths and counters are read once per rollout."""
+    N, K = env.N, agent.num_skills
+    dev = env.device
+    cond_dim = K if agent.conditional else 0
+    storage = RolloutStorage(steps, N, env.state_dim, 28, cond_dim, device=dev)
+    pairs = torch.zeros(steps, N, agent.disc.norm.mean.shape[0], device=dev)
+    cond_all = torch.zeros(steps, N, K, device=dev)
+    cmd_a = torch.zeros(steps, N, dtype=torch.long, device=dev)
+    cmd_b = torch.zeros(steps, N, dtype=torch.long, device=dev)
+    w = torch.zeros(steps, N, device=dev)
+    r_goal = torch.zeros(steps, N, device=dev)
+    r_track = torch.zeros(steps, N, device=dev)
+    bootstrap = torch.zeros(steps, N, device=dev)
+    final_states = torch.zeros(steps, N, env.state_dim, device=dev)
+    truncated = torch.zeros(steps, N, dtype=torch.bool, device=dev)
+    ended = torch.zeros(steps, N, dtype=torch.bool, device=dev)
+    ep_len = torch.zeros(steps, N, dtype=torch.long, device=dev)
+    unstable = torch.zeros((), dtype=torch.long, device=dev)
+    falls = torch.zeros((), dtype=torch.long, device=dev)
+    zeros = torch.zeros(N, device=dev)
+    for t in range(steps):
+        obs = env.state
+        blend = env.command_blend()
+        cond = blend if agent.conditional else None
+        action, logp, value = agent.model.act(obs, cond, deterministic=deterministic)
+        o_t = env.obs
+        cmd_a[t], cmd_b[t], w[t], cond_all[t] = env.prev_cmd, env.cmd, env.w, blend
+        steps_before = env.steps
+        res = env.step(action)
+        pairs[t] = torch.cat([o_t, res.pair_next], dim=1)
+        r_goal[t], r_track[t] = res.r_goal, res.r_track
+        done = res.terminated | res.truncated
+        final_states[t], truncated[t], ended[t] = res.final_state, res.truncated, done
+        ep_len[t] = steps_before + 1
+        storage.add(obs, cond, action, logp, value, zeros, done)
+        unstable += res.unstable.sum()
+        falls += (res.terminated & ~res.unstable).sum()
+    if bool(truncated.any()):  # the rollout's only host reads: this, the lengths and the two counters
+        with torch.no_grad():
+            v_final = agent.model.value(final_states[truncated], cond_all[truncated] if agent.conditional else None)
+        bootstrap[truncated] = agent.cfg.ppo.gamma * v_final
+    lengths = ep_len[ended].tolist()
+    return Rollout(storage, pairs, cond_all, cmd_a, cmd_b, w, r_goal, r_track, bootstrap, lengths, int(unstable),
+                   int(falls))
 
 
 @torch.no_grad()
@@ -196,7 +266,10 @@ def discriminator_rewards(agent: Agent, ro: Rollout) -> dict[str, torch.Tensor]:
     if logits is not None:
         probs = F.softmax(logits, dim=-1)
         out["probs"] = probs.reshape(T, N, -1)
-        out["r_class"] = blended_class_reward(probs, ro.cmd_a.reshape(-1), ro.cmd_b.reshape(-1), ro.w.reshape(-1), agent.num_skills).reshape(T, N)
+        out["r_class"] = blended_class_reward(
+            probs, ro.cmd_a.reshape(-1), ro.cmd_b.reshape(-1), ro.w.reshape(-1), agent.num_skills,
+            agent.cfg.reward.class_form,
+        ).reshape(T, N)
     return out
 
 
@@ -219,12 +292,16 @@ def update_discriminator(agent: Agent, ro: Rollout, rng: np.random.Generator) ->
     fresh_pairs = ro.pairs.reshape(-1, ro.pairs.shape[-1])
     fresh_cond = ro.cond.reshape(-1, K)
     stats: dict[str, float] = {}
+    dev = fresh_pairs.device
     for _ in range(cfg.steps_per_iter):
-        demo, labels = agent.demos.sample(cfg.batch_size, rng)
-        demo = torch.from_numpy(demo)
-        labels = torch.from_numpy(labels)
+        if agent.device_generator is not None:  # off the CPU: demonstration pairs are drawn on the device
+            demo, labels = agent.demos.sample_torch(cfg.batch_size, agent.device_generator)
+        else:
+            demo, labels = agent.demos.sample(cfg.batch_size, rng)
+            demo = torch.from_numpy(demo)
+            labels = torch.from_numpy(labels)
         n_replay = int(cfg.batch_size * cfg.replay_fraction) if agent.replay.size > 0 else 0
-        idx = torch.randint(0, fresh_pairs.shape[0], (cfg.batch_size - n_replay,), generator=agent.generator)
+        idx = torch.randint(0, fresh_pairs.shape[0], (cfg.batch_size - n_replay,), generator=agent.generator).to(dev)
         pol, pol_c = fresh_pairs[idx], fresh_cond[idx]
         if n_replay:
             rp, rc = agent.replay.sample(n_replay, agent.generator)
@@ -239,7 +316,7 @@ def update_discriminator(agent: Agent, ro: Rollout, rng: np.random.Generator) ->
             loss = loss + cfg.logit_reg * logit_regulariser(agent.disc)
         if cfg.weight_decay > 0:
             loss = loss + cfg.weight_decay * weight_decay_term(agent.disc)
-        l_cls = torch.zeros(())
+        l_cls = torch.zeros((), device=dev)
         if agent.conditional:
             kind = agent.cfg.cgail.class_loss
             l_cls = class_loss(c_data, F.one_hot(labels, K).float(), kind) + class_loss(c_pol, pol_c, kind)
@@ -278,16 +355,33 @@ def class_accuracy_on_policy(agent: Agent, ro: Rollout, probs: torch.Tensor) -> 
 
 
 # ---------------------------------------------------------------------------- the learner
+def _synchronize(device: str) -> None:
+    """Wait for queued CUDA work (no-op on the CPU), so wall-clock phase timings are attributed correctly."""
+    if torch.device(device).type == "cuda":
+        torch.cuda.synchronize(device)
+
+
 class CgailLearner:
     """One cgail iteration for the shared runner (charctl.rl.runner): rollout, rewards, PPO,
     discriminator. Counters live on the agent so checkpoints keep their layout."""
 
     def __init__(self, cfg):
+        from charctl.config import resolve_device
+        from charctl.sim.warp_batch import resolve_backend
+
         torch.set_num_threads(int(cfg.train.torch_threads))
         self.cfg = cfg
-        self.agent = build_agent(cfg)
-        self.env = CgailEnv(self.agent.skills, cfg.env, seed=cfg.seed, conditional=self.agent.conditional,
-                            tracking=cfg.reward.kind == "tracking")
+        self.device = resolve_device(str(cfg.device))  # auto -> cuda when available, else cpu
+        self.backend = resolve_backend(str(getattr(cfg.env, "backend", "cpu")), self.device)  # cpu | warp
+        self.agent = build_agent(cfg, self.device)
+        if self.backend == "warp":  # MuJoCo Warp on the same device: rollout never leaves it
+            from charctl.experiments.cgail.env_torch import CgailDeviceEnv
+
+            self.env = CgailDeviceEnv(self.agent.skills, cfg.env, seed=cfg.seed, conditional=self.agent.conditional,
+                                      tracking=cfg.reward.kind == "tracking", device=self.device)
+        else:
+            self.env = CgailEnv(self.agent.skills, cfg.env, seed=cfg.seed, conditional=self.agent.conditional,
+                                tracking=cfg.reward.kind == "tracking")
         self.samples_per_iteration = cfg.train.rollout_steps * self.env.N
         self.episode_lengths: list = []
         self.rng = np.random.default_rng(cfg.seed + 7919)
@@ -331,9 +425,11 @@ class CgailLearner:
         reward = total_reward(agent, rew, ro.r_goal, ro.r_track) + ro.bootstrap
         ro.storage.rewards = reward
         with torch.no_grad():
-            blend = torch.as_tensor(env.command_blend(), dtype=torch.float32) if agent.conditional else None
-            last_v = agent.model.value(torch.as_tensor(env.state, dtype=torch.float32), blend)
+            dev = agent.device
+            blend = torch.as_tensor(env.command_blend(), dtype=torch.float32, device=dev) if agent.conditional else None
+            last_v = agent.model.value(torch.as_tensor(env.state, dtype=torch.float32, device=dev), blend)
         ro.storage.finish(last_v, cfg.ppo.gamma, cfg.ppo.lam)
+        _synchronize(agent.device)  # phase timings on a GPU: wait for the queued kernels
         t2 = time.perf_counter()
         ppo_stats = agent.ppo.update(ro.storage)
         # normaliser statistics move only after the update, so the PPO ratio starts at exactly 1
@@ -351,7 +447,7 @@ class CgailLearner:
             "train/r_track": float(ro.r_track.mean()),
             "train/reward": float(reward.mean()), "train/episode_length": mean_len,
             "train/unstable_resets_total": float(agent.unstable_total), "train/falls": float(ro.falls),
-            "train/unstable_rate": ro.unstable / n,
+            "train/unstable_rate": float(ro.unstable) / n, "sim/unstable_resets": float(ro.unstable),
             "perf/samples_per_s": n / (t4 - t0), "perf/rollout_samples_per_s": n / (t1 - t0),
             "perf/frac_rollout": (t1 - t0) / (t4 - t0), "perf/frac_reward": (t2 - t1) / (t4 - t0),
             "perf/frac_ppo": (t3 - t2) / (t4 - t0), "perf/frac_disc": (t4 - t3) / (t4 - t0),
@@ -384,6 +480,8 @@ def train(cfg, run) -> dict:
 
     learner = CgailLearner(cfg)
     kind = "cGAIL" if learner.agent.conditional else "AMP"
+    if cfg.reward.kind == "tracking":
+        kind = f"tracking, {kind}"
     settings = RunnerSettings(
         total_samples=int(cfg.train.total_samples), checkpoint_every=int(cfg.train.checkpoint_every),
         log_every=int(cfg.train.log_every), description=f"cgail ({kind}, {learner.agent.num_skills} skills)",

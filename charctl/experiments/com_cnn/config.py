@@ -1,7 +1,7 @@
-"""Structured config of the com-cnn experiment (SPEC §3, paper: "Motion generation using Center of
+"""Structured config of the com-cnn experiment (docs/com-cnn.md; paper: "Motion generation using Center of
 Mass", Park, Sohn, Lee, KCGS 2020). Defaults are the paper's values where it gives one; the keys
-it leaves open carry a comment saying what we chose. conf/experiment/com-cnn.yaml restates them,
-conf/preset/com-cnn/<scale>.yaml sets the scale (steps, batch, clips)."""
+it leaves open carry a comment saying what we chose. Each value is stated here only;
+conf/preset/com-cnn/<scale>.yaml state what a scale changes (steps, batch, clips)."""
 
 from __future__ import annotations
 

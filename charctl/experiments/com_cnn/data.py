@@ -89,7 +89,7 @@ def map_masses(table: dict, part_to_body: dict, names, key: str) -> np.ndarray:
             masses[list(names).index(body)] += float(m)
             hits += 1
     if hits == 0 or masses.sum() <= 0:
-        raise CharctlError(f"no body of the skeleton matches the mass table (parts {', '.join(list(table)[:4])}, ...; bodies {', '.join(list(names)[:4])}, ...); map them with {key}")
+        raise CharctlError(f"no body of the skeleton matches the mass table (parts {', '.join(list(table)[:4])}, " f"...; bodies {', '.join(list(names)[:4])}, ...); map them with {key}")
     return masses
 
 
@@ -270,7 +270,7 @@ def split_sequences(seqs: list[Sequence], test_clips) -> tuple[list[Sequence], l
     known = {s.base for s in seqs}
     missing = sorted(test_set - known)
     if missing:
-        raise CharctlError(f"data.test_clips {missing} are not among the clips ({', '.join(sorted(known)[:8])}, ...); set data.test_clips=[...]")
+        raise CharctlError(f"data.test_clips {missing} are not among the clips " f"({', '.join(sorted(known)[:8])}, ...); set data.test_clips=[...]")
     train = [s for s in seqs if s.base not in test_set]
     test = [s for s in seqs if s.base in test_set]
     if not train:

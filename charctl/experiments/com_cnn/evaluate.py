@@ -10,83 +10,41 @@
       the ground truth's (the paper's input needs it); with root_prev nothing but C_t is given.
   plus generation speed (batch 1, CPU, frames/s) of every run.
 --dtw: each held-out clip generated autoregressively from its first frame and its COM path, then
-  DTW-aligned to the ground truth; mean per-frame e_pose (SPEC §1, radians, l2 over joints).
+  DTW-aligned to the ground truth; mean per-frame e_pose (docs/cgail.md, eq. 6.1; radians, l2 over joints).
 Writes report.md, pose_error.json and figures to -o DIR (default: <first run>/eval/).
 """
 
 from __future__ import annotations
 
 import json
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from charctl.errors import CharctlError
+from charctl.experiments.com_cnn.checkpoint import load_run, resolve_targets
 from charctl.experiments.com_cnn.data import (
-    BodyModel, Sequence, WindowSet, heading_frame, load_sequences, motion_type, split_sequences,
+    BodyModel,
+    Sequence,
+    WindowSet,
+    heading_frame,
+    motion_type,
+    split_sequences,
 )
+from charctl.experiments.com_cnn.generate import generation_demo
 from charctl.experiments.com_cnn.rollout import (
-    Buffer, CnnPredictor, LastFrame, Predictor, fit_nearest_neighbour, given_reference, previous_root_reference, rollout,
+    Buffer,
+    LastFrame,
+    Predictor,
+    fit_nearest_neighbour,
+    given_reference,
+    previous_root_reference,
+    rollout,
 )
 from charctl.motion import rotations as R
 
 # data keys that must agree for runs to share one evaluation table
 SPLIT_KEYS = ("bvh_dir", "clips", "mirror", "test_clips", "fps", "loop_min_seconds", "loop_blend_frames", "bvh_scale")
-
-
-@dataclass
-class LoadedRun:
-    dir: Path
-    cfg: object
-    model: object
-    body: BodyModel
-    seqs: list[Sequence]
-    metrics: dict
-    suffix: str = ""  # tells apart runs whose settings read the same
-
-    @property
-    def label(self) -> str:
-        m, d = self.cfg.model, self.cfg.data
-        kind = "CNN, history + COM" if m.use_com else "CNN, history only"
-        extra = "".join(f", {k}={v}" for k, v in (("fc", m.fc_activation), ("opt", self.cfg.train.optimizer)) if v not in ("none", "sgd"))
-        return f"{kind} (i={d.history}, w={m.kernel}, ch={'/'.join(str(c) for c in m.channels)}, {d.frame}{extra}){self.suffix}"
-
-    def predictor(self) -> CnnPredictor:
-        return CnnPredictor(self.label, self.model, int(self.cfg.data.history), str(self.cfg.data.frame))
-
-
-def load_run(run_dir: str | Path, overrides: list[str] | None = None, device: str = "cpu") -> LoadedRun:
-    """Config, data and trained network of a com-cnn run directory."""
-    import torch
-
-    from charctl.experiments.com_cnn.config import Config
-    from charctl.experiments.com_cnn.model import build_model, model_signature
-    from charctl.runs import open_run
-
-    run = open_run(run_dir, Config, overrides)
-    if run.experiment != "com-cnn":
-        raise CharctlError(f"{run_dir} is a {run.experiment!r} run, not com-cnn")
-    if not run.has_checkpoint():
-        raise CharctlError(f"{run_dir} has no checkpoint (checkpoints/last.pt): train it first")
-    torch.set_num_threads(int(run.cfg.train.torch_threads))
-    seqs, body = load_sequences(run.cfg)
-    state = run.load_checkpoint(model_signature(run.cfg, body.pose_dim))
-    model = build_model(run.cfg, body.pose_dim)
-    model.load_state_dict(state["model"])
-    model.eval().to(device)
-    metrics_path = Path(run_dir) / "metrics.json"
-    metrics = json.loads(metrics_path.read_text()) if metrics_path.is_file() else {}
-    return LoadedRun(Path(run_dir), run.cfg, model, body, seqs, metrics)
-
-
-def resolve_targets(targets: list[str]) -> list[Path]:
-    from charctl.runs import latest_run
-
-    out = []
-    for t in targets:
-        out.append(latest_run("outputs", "com-cnn") if t == "com-cnn" else Path(t))
-    return out
 
 
 # ---------------------------------------------------------------------------- metrics
@@ -164,7 +122,6 @@ def dtw_errors(pred: Predictor, seqs: list[Sequence], body: BodyModel, motion_ty
     from charctl.eval.pose import pose_error, pose_error_matrix
 
     Tmax = max(s.num_frames for s in seqs)
-    H = Tmax - 1
     tgt = np.stack([np.minimum(np.arange(1, Tmax), s.num_frames - 1) for s in seqs])  # (B, H), padded by the last frame
 
     def stack(attr: str) -> np.ndarray:
@@ -193,12 +150,11 @@ def dtw_errors(pred: Predictor, seqs: list[Sequence], body: BodyModel, motion_ty
 
 
 # ---------------------------------------------------------------------------- command
-def evaluate_command(targets: list[str], options: dict, overrides: list[str]) -> dict:
-    from charctl.experiments.com_cnn.generate import generation_demo
-
+def evaluate(targets: list[str], options: dict, overrides: list[str]) -> dict:
+    """`--pose-error` and/or `--dtw` over one or more runs -> pose_error.json, report.md, figures."""
     if not options.get("pose_error") and not options.get("dtw"):
         raise CharctlError("com-cnn evaluates with --pose-error and/or --dtw")
-    runs = [load_run(d, overrides) for d in resolve_targets(targets)]
+    runs = [load_run(d, overrides) for d in resolve_targets(targets, overrides)]
     labels = [r.label for r in runs]
     for r in runs:
         if labels.count(r.label) > 1:
@@ -227,7 +183,7 @@ def evaluate_command(targets: list[str], options: dict, overrides: list[str]) ->
         result["teacher_forced"] = {p.name: teacher_forced_errors(p, test_seqs, body, types) for p in preds}
         result["autoregressive"] = {p.name: autoregressive_errors(p, test_seqs, body, horizon, int(cfg.eval.ar_stride), types) for p in preds}
         result["generation"] = {r.label: generation_demo(r, out_dir / f"generation_{n}.png") for n, r in enumerate(runs)}
-        result["training"] = {r.label: {k: r.metrics.get(k) for k in ("step", "samples_seen", "train_wall_s", "samples_per_s", "train_loss_ema", "test_loss", "train_windows", "test_windows", "parameters", "device")} for r in runs}
+        result["training"] = {r.label: {k: r.metrics.get(k) for k in ("step", "samples", "wall_s", "samples_per_s", "train_loss_ema", "test_loss", "train_windows", "test_windows", "parameters", "device")} for r in runs}
         plot_ar_curves(result["autoregressive"], float(cfg.data.fps), out_dir / "ar_curve.png")
     if options.get("dtw"):
         result["dtw"] = {p.name: dtw_errors(p, test_seqs, body, types) for p in preds}
@@ -273,7 +229,7 @@ def render_report(res: dict) -> str:
         lines += _teacher_forced_section(res, types) + _autoregressive_section(res, types) + _speed_section(res)
     if "dtw" in res:
         lines += ["", "## DTW: whole held-out clips generated from their first frame and COM path", "",
-                  "Mean per-frame e_pose (radians, l2 over the movable joints, SPEC §1) after DTW alignment to the ground truth; "
+                  "Mean per-frame e_pose (radians, l2 over the movable joints, as " "in cgail's eq. 6.1) after DTW alignment to the ground truth; "
                   "frame by frame without alignment in brackets.", "",
                   _row(["model", *types, "all"]), _row(["---"] * (len(types) + 2))]
         for name, r in res["dtw"].items():
@@ -284,7 +240,7 @@ def render_report(res: dict) -> str:
 
 def _teacher_forced_section(res: dict, types: list[str]) -> list[str]:
     lines = ["## Teacher forcing (Table 5 style): mean joint-angle error, degrees", "",
-             "History and C_t from the ground truth. Error = angle between the predicted and the true local rotation, "
+             "History and C_t from the ground truth. Error = angle " "between the predicted and the true local rotation, "
              "averaged over the movable joints and every frame of the held-out clips.", "",
              _row(["model", *types, "all", "frames"]), _row(["---"] * (len(types) + 3))]
     for name, r in res["teacher_forced"].items():
@@ -304,7 +260,7 @@ def _autoregressive_section(res: dict, types: list[str]) -> list[str]:
     marks = [h for h in (1, 5, 15, 30, 60, 90, 150, 300) if h <= n]
     lines = ["", "## Autoregressive: error against horizon (history = the model's own output)", "",
              "Seeded with ground-truth history at every " + "k-th frame of each held-out clip, then self-fed; C_t from the ground truth. "
-             "With data.frame=root_t the root's heading frame at t is also the ground truth's (the paper's input needs it); "
+             "With data.frame=root_t the root's heading frame at t is also the ground truth's " "(the paper's input needs it); "
              "with root_prev the model places the root itself.", "", "![autoregressive error](ar_curve.png)", "",
              _row(["model", "type", *[f"{h / fps:.2f} s" for h in marks], "root xz error at the end (m)"]), _row(["---"] * (len(marks) + 3))]
     for name, r in ar.items():
@@ -320,15 +276,15 @@ def _speed_section(res: dict) -> list[str]:
              _row(["---"] * 9)]
     for name, t in res["training"].items():
         g = res["generation"][name]
-        lines.append(_row([name, t.get("step"), t.get("samples_seen"), _fmt(t.get("train_wall_s"), 1), _fmt(t.get("samples_per_s"), 0),
+        lines.append(_row([name, t.get("step"), t.get("samples"), _fmt(t.get("wall_s"), 1), _fmt(t.get("samples_per_s"), 0),
                            _fmt(t.get("train_loss_ema"), 4), f"{g['frames_per_s']:.0f}", f"{g['real_time_factor']:.1f}",
                            f"{100 * g['com_tracking_error_m']:.1f}"]))
-    lines += ["", "Generation demo (eval): seed = the first frames of the seed clip, then a circle of radius 2 m at 1.2 m/s "
-              "with the COM lowered by generate.crouch_drop from 60 % of the path on. COM tracking = mean distance between the "
+    lines += ["", "Generation demo (eval): seed = the first frames of " "the seed clip, then a circle of radius 2 m at 1.2 m/s "
+              "with the COM lowered by generate.crouch_drop from 60 % of " "the path on. COM tracking = mean distance between the "
               "generated body's COM (paper mass table) and the input COM.", ""]
     for n, name in enumerate(res["generation"]):
         g = res["generation"][name]
-        lines += [f"{name}: root height {g['root_height_m'][0]:.2f}–{g['root_height_m'][1]:.2f} m for an input COM height of "
+        lines += [f"{name}: root height {g['root_height_m'][0]:.2f}–{g['root_height_m'][1]:.2f} " "m for an input COM height of "
                   f"{g['input_com_height_m'][0]:.2f}–{g['input_com_height_m'][1]:.2f} m.", "", f"![generation {n}](generation_{n}.png)", ""]
     return lines
 

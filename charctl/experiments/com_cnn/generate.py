@@ -17,7 +17,15 @@ from pathlib import Path
 import numpy as np
 
 from charctl.errors import CharctlError
-from charctl.experiments.com_cnn.data import XZ, BodyModel, Sequence, canonical_start, heading_frame, heading_yaw, make_sequence
+from charctl.experiments.com_cnn.data import (
+    XZ,
+    BodyModel,
+    Sequence,
+    canonical_start,
+    heading_frame,
+    heading_yaw,
+    make_sequence,
+)
 from charctl.experiments.com_cnn.rollout import Buffer, ReferenceFn, previous_root_reference, rollout
 from charctl.motion import rotations as R
 
@@ -59,7 +67,7 @@ def read_com_csv(path: str | Path, fps: float) -> np.ndarray:
         raise CharctlError(f"com path {p}: empty file")
     header = [c.strip().lower() for c in rows[0]]
     if header not in (["x", "y", "z"], ["t", "x", "y", "z"]):
-        raise CharctlError(f"com path {p}: expected the header 'x,y,z' or 't,x,y,z' (metres, y up; t in seconds), got '{','.join(rows[0])}'")
+        raise CharctlError(f"com path {p}: expected the header 'x,y,z' or 't,x,y,z' " f"(metres, y up; t in seconds), got '{','.join(rows[0])}'")
     values = np.empty((len(rows) - 1, len(header)))
     for n, row in enumerate(rows[1:]):
         if len(row) != len(header):
@@ -134,7 +142,7 @@ def make_com_path(spec: str, start: np.ndarray, seconds: float, fps: float, crou
         path = read_com_csv(spec, fps)
         path = path + (start - path[0]) * XZ  # first point onto the seed's last COM (horizontally)
     else:
-        raise CharctlError(f"com path {spec!r}: give a .csv file or one of {', '.join(f'{k}:...' for k in PATHS)} (e.g. circle:r=2,speed=1.2)")
+        raise CharctlError(f"com path {spec!r}: give a .csv file or one of " f"{', '.join(f'{k}:...' for k in PATHS)} (e.g. circle:r=2,speed=1.2)")
     if crouch_at is not None:
         t = np.arange(1, path.shape[0] + 1) / fps
         ramp = np.clip((t - crouch_at) / max(float(gen_cfg.crouch_ramp_s), 1e-9), 0.0, 1.0)
@@ -158,7 +166,7 @@ def seed_sequence(run) -> Sequence:
     seq = next((s for s in run.seqs if s.name == name), None)
     if seq is None:
         if run.body.kind != "humanoid":
-            raise CharctlError(f"generate.seed_clip={name!r} is not among the clips of data.bvh_dir ({', '.join(s.name for s in run.seqs[:6])}, ...)")
+            raise CharctlError(f"generate.seed_clip={name!r} is not among the clips of " f"data.bvh_dir ({', '.join(s.name for s in run.seqs[:6])}, ...)")
         from charctl.motion.library import load_clip
 
         clip = load_clip(name).resample(run.cfg.data.fps)
@@ -335,38 +343,3 @@ def plot_generation(out: dict, fps: float, path: Path) -> None:
     bx.legend(fontsize=7)
     bx.set_title("heights")
     save_figure(fig, path)
-
-
-def export_command(target: str, options: dict, overrides: list[str]) -> None:
-    from charctl.experiments.com_cnn.evaluate import load_run, resolve_targets
-
-    run = load_run(resolve_targets([target])[0], overrides)
-    g, fps = run.cfg.generate, float(run.cfg.data.fps)
-    spec = options.get("com_path") or str(g.com_path)
-    out = generate_motion(run, spec, float(options.get("seconds") or g.seconds), options.get("crouch_at"))
-    st = out["stats"]
-    L, H = st["seed_frames"], st["frames"]
-    print(f"generated {H} frames ({H / fps:.1f} s) after a {L}-frame seed ({st['seed_clip']}) in {st['wall_s']:.2f} s: "
-          f"{st['frames_per_s']:.0f} frames/s = {st['real_time_factor']:.1f}x real time (batch 1, {run.model.fc[0].weight.device}); "
-          f"mean |body COM - input COM| = {st['com_tracking_error_m'] * 100:.1f} cm")
-    bvh, video = options.get("bvh"), options.get("video")
-    if bvh is None and video is None:
-        bvh = run.dir / "generated.bvh"
-    side = str(Path(bvh or video).with_suffix(""))
-    np.savetxt(side + "_com_path.csv", out["com_path"], delimiter=",", header="x,y,z", comments="", fmt="%.5f")
-    plot_generation(out, fps, Path(side + "_plot.png"))
-    frames = (out["root_pos"], out["root_rot"], out["joint_rot"])
-    if bvh is not None:
-        if run.body.kind == "humanoid":
-            from charctl.motion.bvh import write_bvh
-
-            write_bvh(frames_to_clip(run, "generated", *frames), bvh)
-        else:
-            write_generic_bvh(run.body, *frames, fps, Path(bvh))
-        print(f"wrote {bvh} (frames 0-{L - 1}: seed from the data, {L}-{L + H - 1}: generated)")
-    if video is not None:
-        if run.body.kind != "humanoid":
-            raise CharctlError("--video renders the DeepMimic humanoid; this run was trained on data.bvh_dir (use --bvh)")
-        info = render_with_com(frames_to_clip(run, "generated", *frames), np.concatenate([out["seed"].com, out["com_path"]]), Path(video))
-        print(f"wrote {video} ({info['frames']} frames; purple ball = input COM, as in the paper's Fig. 1)")
-    print(f"wrote {side}_com_path.csv (the clamped input COM) and {side}_plot.png")

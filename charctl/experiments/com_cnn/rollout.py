@@ -9,8 +9,9 @@ Everything is batched over B rollouts; the only loop is over time, which is sequ
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable, Protocol
+from typing import Protocol
 
 import numpy as np
 

@@ -14,6 +14,7 @@ import numpy as np
 from charctl.experiments.com_cnn.data import BodyModel, WindowSet, build_windows, constrain_joint_exp
 from charctl.experiments.com_cnn.model import ComCNN, build_model, model_signature
 
+
 def make_optimizer(params, t):
     """The optimiser named by train.optimizer (paper §4: SGD)."""
     import torch
@@ -27,15 +28,10 @@ def make_optimizer(params, t):
 
 
 def pick_device(name: str) -> str:
-    import torch
+    """auto -> cuda when available, else cpu; an absent CUDA device is a one-line error."""
+    from charctl.config import resolve_device
 
-    if name == "auto":
-        return "cuda" if torch.cuda.is_available() else "cpu"
-    if name == "cuda" and not torch.cuda.is_available():
-        from charctl.errors import CharctlError
-
-        raise CharctlError("device=cuda but no CUDA device is available (use device=cpu or device=auto)")
-    return name
+    return resolve_device(name)
 
 
 class BatchSource:
@@ -119,6 +115,7 @@ def train(cfg, run) -> dict:
     """Train one network into `run` (resumable) and write metrics.json."""
     import torch
 
+    from charctl.guard import diverged, first_non_finite
     from charctl.progress import TrainingProgress
     from charctl.runs import StopFlag
 
@@ -144,8 +141,17 @@ def train(cfg, run) -> dict:
     steps, batch = int(cfg.train.steps), int(cfg.train.batch_size)
 
     def save() -> None:
+        bad = first_non_finite({"train/loss_ema": ema}, model)
+        if bad:  # never overwrite the last finite checkpoint with a diverged network
+            stop_diverged(bad)
         run.save_checkpoint({"model": model.state_dict(), "optimizer": opt.state_dict(), "step": step,
                              "train_wall_s": wall, "loss_ema": ema, "pose_dim": body.pose_dim}, signature)
+
+    def stop_diverged(what: str) -> None:
+        run.log_scalars({"train/diverged": 1.0}, step * batch)
+        run.write_metrics({"diverged": True, "diverged_at_step": step, "diverged_on": what, "step": step,
+                           "samples": step * batch, "train_loss_ema": ema, "wall_s": wall, "device": device})
+        raise diverged(what, where=f"step {step}", checkpoint=run.checkpoint_path)
 
     test_metrics: dict = {}
     with StopFlag() as stop, TrainingProgress(steps * batch, "com-cnn", unit="samples") as bar:
@@ -164,6 +170,8 @@ def train(cfg, run) -> dict:
             wall += time.perf_counter() - t0
             step += 1
             lv = float(loss.detach())
+            if not np.isfinite(lv):  # the update that produced this loss has already been applied: stop here
+                stop_diverged(f"train/loss = {lv}")
             ema = lv if ema is None else 0.98 * ema + 0.02 * lv
             if step % 20 == 0 or step == steps:
                 run.log_scalars({"train/loss": lv, "train/loss_ema": ema, "train/samples_per_s": step * batch / max(wall, 1e-9)}, step * batch)
@@ -174,12 +182,12 @@ def train(cfg, run) -> dict:
             if step % int(cfg.train.checkpoint_every) == 0 or stop.requested:
                 save()
             if stop.requested:
-                print(f"stopped at step {step}; resume with: charctl train com-cnn --resume {run.dir}")
-                break
+                raise stop.interrupted(f"interrupted at step {step} ({step * batch} samples): checkpoint written; "
+                                       f"continue with --resume {run.dir}")
     save()
     metrics = {
-        "step": step, "samples_seen": step * batch, "train_loss_ema": ema, **{f"test_{k}": v for k, v in test_metrics.items()},
-        "train_wall_s": wall, "samples_per_s": step * batch / max(wall, 1e-9), "data_build_s": data_s,
+        "step": step, "samples": step * batch, "train_loss_ema": ema, **{f"test_{k}": v for k, v in test_metrics.items()},
+        "wall_s": wall, "samples_per_s": step * batch / max(wall, 1e-9), "data_build_s": data_s,
         "train_windows": len(train_w), "test_windows": len(test_w), "pose_dim": body.pose_dim,
         "z_dim": model.z_dim, "parameters": sum(p.numel() for p in model.parameters()), "device": device,
         "train_clips": sorted({s.base for s in train_w.seqs}), "test_clips": sorted({s.base for s in test_w.seqs}),

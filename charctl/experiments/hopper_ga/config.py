@@ -1,6 +1,6 @@
-"""Structured config of the hopper-ga experiment (SPEC §5, Kang 1999). Values here are defaults;
-conf/experiment/hopper-ga.yaml repeats them with the equation each one belongs to, and the scale
-presets live in conf/preset/hopper-ga/. Units: metres, seconds, kilograms, radians."""
+"""Structured config of the hopper-ga experiment (docs/hopper-ga.md, Kang 1999). Each value is stated
+here only, with the equation it belongs to; conf/preset/hopper-ga/<scale>.yaml state what a scale
+changes. Units: metres, seconds, kilograms, radians."""
 
 from __future__ import annotations
 
@@ -136,6 +136,7 @@ class ExportConfig:
 
 @dataclass
 class Config(BaseConfig):
+    DEVICES = ("cpu",)  # numpy only: device=cuda is refused (charctl.config.check_device_name), auto = cpu
     experiment: str = "hopper-ga"
     speed: float = 5.0  # m/s, target running speed = HIP speed x_dot of eq 2-3 (conceptual control parameter)
     beta: float = 0.0  # briskness, eq 14, 0 <= beta < 1

@@ -13,8 +13,8 @@ from __future__ import annotations
 
 import random
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Callable
 
 import numpy as np
 
@@ -67,7 +67,7 @@ class GAState:
         }
 
     @classmethod
-    def from_checkpoint(cls, d: dict) -> "GAState":
+    def from_checkpoint(cls, d: dict) -> GAState:
         version, internal, gauss = d["random_state"]
         return cls(
             generation=int(d["generation"]),
@@ -124,7 +124,7 @@ def evolve(
             for k in metrics:
                 metrics[k][bad] = redo[k]
         if not metrics["valid"].any():
-            raise CharctlError(f"no physically valid individual in {N} x {int(ga_cfg.init_retries) + 1} random draws; widen the bounds (see `charctl config hopper-ga`)")
+            raise CharctlError(f"no physically valid individual in {N} x {int(ga_cfg.init_retries) + 1} " "random draws; widen the bounds (see `charctl config hopper-ga`)")
         _assign(pop, metrics["fitness"])
         _record(st, pop, metrics)
         if on_generation:

@@ -135,7 +135,7 @@ class Params:
     eta: np.ndarray  # (N, D) eq 11 response per balance DOF
     bad: np.ndarray  # (N,) bool: non-finite or out of bounds
 
-    def take(self, rows: np.ndarray) -> "Params":
+    def take(self, rows: np.ndarray) -> Params:
         return Params(**{k: v[rows] for k, v in self.__dict__.items()})
 
 
@@ -232,7 +232,7 @@ def flight_time(y0, vy0, yf, g: float) -> np.ndarray:
         return np.where(disc >= 0.0, (-vy0 - np.sqrt(np.where(disc >= 0.0, disc, 0.0))) / g, np.nan)
 
 
-def landing_speed_error(vy_td, l, kappa, theta0, m, xdot, s: "Settings", d_min) -> np.ndarray:
+def landing_speed_error(vy_td, l, kappa, theta0, m, xdot, s: Settings, d_min) -> np.ndarray:
     """G(v) = (vertical HIP speed at the end of the flight) - v for a cycle touching down with
     vertical speed v (m/s); NaN where the stance or the flight is impossible. A periodic running
     gait has G = 0: the next touchdown repeats this one."""
@@ -245,7 +245,7 @@ def landing_speed_error(vy_td, l, kappa, theta0, m, xdot, s: "Settings", d_min) 
     return np.where(ok, vy_lo + s.g * T - vy_td, np.nan)
 
 
-def periodic_touchdown(l, kappa, theta0, m, xdot, s: "Settings", d_min) -> tuple[np.ndarray, np.ndarray]:
+def periodic_touchdown(l, kappa, theta0, m, xdot, s: Settings, d_min) -> tuple[np.ndarray, np.ndarray]:
     """Touchdown vertical speed v (m/s, <= 0) of the steady running cycle, and a mask of the rows
     that have one: G(v) = landing speed - v = 0, so that the next touchdown repeats this one.
 
@@ -314,7 +314,7 @@ class Cycle:
     xdot: np.ndarray  # (N,)
     code: np.ndarray  # (N,) invalidity bits
 
-    def take(self, rows: np.ndarray) -> "Cycle":
+    def take(self, rows: np.ndarray) -> Cycle:
         """The cycles of `rows`, cropped to their own longest cycle."""
         K = int(self.end[rows].max()) + 1 if len(rows) else 1
         return Cycle(**{k: (v[rows, :K] if v.ndim >= 2 else v[rows]) for k, v in self.__dict__.items()})

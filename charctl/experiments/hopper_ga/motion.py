@@ -13,12 +13,19 @@ from pathlib import Path
 
 import numpy as np
 
-
 from charctl.errors import CharctlError
-from charctl.motion.bvh import write_bvh_file
 from charctl.experiments.hopper_ga.model import (
-    Rollout, Settings, _finish, decode, describe_invalid, dof_to_joint_angles, leg_cycle, leg_lengths, repeat_cycles,
+    Rollout,
+    Settings,
+    _finish,
+    decode,
+    describe_invalid,
+    dof_to_joint_angles,
+    leg_cycle,
+    leg_lengths,
+    repeat_cycles,
 )
+from charctl.motion.bvh import write_bvh_file
 
 # Capsule radii (m) of the rendered bodies (cosmetic; masses live in the config).
 _RADIUS = {"pelvis": 0.07, "chest": 0.11, "neck": 0.1, "shoulder": 0.045, "elbow": 0.04, "hip": 0.065, "knee": 0.05}
@@ -79,7 +86,7 @@ def skeleton(s: Settings, l: float) -> list[dict]:
     w = body.hip_half_width
     joints = [{"name": "root", "parent": None, "offset": np.zeros(3), "end": None, "kind": "pelvis"}]
     children = {n: [] for n in body.names}
-    for j, name in enumerate(body.names):
+    for j in range(len(body.names)):
         if body.parent[j] >= 0:
             children[body.names[body.parent[j]]].append(j)
 
@@ -172,9 +179,9 @@ def mjcf(s: Settings, l: float) -> tuple[str, list[tuple[str, int, int]]]:
         r = _RADIUS.get(key, 0.045)
         rgba = "0.85 0.55 0.4 1" if j["name"].startswith("left") else "0.4 0.6 0.85 1"
         if j["name"] == "neck":
-            out.append(f'{pad}  <geom type="sphere" size="{r}" pos="{seg[0] * 0.6:.4f} {seg[1] * 0.6:.4f} {seg[2] * 0.6:.4f}" rgba="0.9 0.8 0.7 1"/>')
+            out.append(f'{pad}  <geom type="sphere" size="{r}" ' f'pos="{seg[0] * 0.6:.4f} {seg[1] * 0.6:.4f} {seg[2] * 0.6:.4f}" rgba="0.9 0.8 0.7 1"/>')
         else:
-            out.append(f'{pad}  <geom type="capsule" size="{r}" fromto="0 0 0 {seg[0]:.4f} {seg[1]:.4f} {seg[2]:.4f}" rgba="{rgba}"/>')
+            out.append(f'{pad}  <geom type="capsule" size="{r}" ' f'fromto="0 0 0 {seg[0]:.4f} {seg[1]:.4f} {seg[2]:.4f}" rgba="{rgba}"/>')
         for k in kids[j["name"]]:
             out += body_xml(k, depth + 1)
         out.append(f"{pad}</body>")
@@ -185,8 +192,8 @@ def mjcf(s: Settings, l: float) -> tuple[str, list[tuple[str, int, int]]]:
         root_kids += body_xml(k, 3)
     xml = "\n".join([
         '<mujoco model="hopper-ga">',
-        '  <visual><headlight ambient="0.45 0.45 0.45" diffuse="0.6 0.6 0.6"/><global offwidth="1280" offheight="720"/></visual>',
-        '  <asset><texture name="grid" type="2d" builtin="checker" rgb1="0.25 0.3 0.35" rgb2="0.35 0.4 0.45" width="256" height="256"/>',
+        '  <visual><headlight ambient="0.45 0.45 0.45" ' 'diffuse="0.6 0.6 0.6"/><global offwidth="1280" offheight="720"/></visual>',
+        '  <asset><texture name="grid" type="2d" builtin="checker" ' 'rgb1="0.25 0.3 0.35" rgb2="0.35 0.4 0.45" width="256" height="256"/>',
         '    <material name="grid" texture="grid" texrepeat="40 40"/></asset>',
         "  <worldbody>",
         '    <geom type="plane" size="100 100 0.1" euler="-90 0 0" pos="40 0 0" material="grid"/>',
@@ -194,7 +201,7 @@ def mjcf(s: Settings, l: float) -> tuple[str, list[tuple[str, int, int]]]:
         '    <body name="pelvis" pos="0 1 0">',
         "      <freejoint/>",
         '      <camera name="side" mode="trackcom" pos="0.4 0.0 3.2" xyaxes="1 0 0 0 1 0"/>',
-        f'      <geom type="capsule" size="{_RADIUS["pelvis"]}" fromto="0 0 {-w:.4f} 0 0 {w:.4f}" rgba="0.5 0.5 0.55 1"/>',
+        f'      <geom type="capsule" size="{_RADIUS["pelvis"]}" ' f'fromto="0 0 {-w:.4f} 0 0 {w:.4f}" rgba="0.5 0.5 0.55 1"/>',
         *root_kids,
         "    </body>",
         "  </worldbody>",

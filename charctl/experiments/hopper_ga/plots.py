@@ -85,7 +85,7 @@ def strip(motion, s, l: float, path: Path, title: str, frames: int = 12) -> Path
         for side, col in ((0, (0.2, 0.4, shade)), (1, (shade, 0.45, 0.2))):
             pts = np.stack([legs.hip[0, k, side], legs.knee[0, k, side], legs.foot[0, k, side]])
             ax.plot(pts[:, 0], pts[:, 1], "-", color=col, lw=1.5)
-        for j, name in enumerate(s.body.names):
+        for j in range(len(s.body.names)):
             ax.plot([up[k, j, 0], tip[k, j, 0]], [up[k, j, 1], tip[k, j, 1]], "-", color=(0.3, 0.3, 0.3), lw=1.2)
         ax.plot([motion.root[k, 0], up[k, 0, 0]], [motion.root[k, 1], up[k, 0, 1]], "-", color=(0.3, 0.3, 0.3), lw=1.2)
     ax.axhline(0.0, color="k", lw=0.8)

@@ -11,6 +11,8 @@ import numpy as np
 from charctl.errors import CharctlError
 from charctl.experiments.hopper_ga.model import Settings, describe_invalid, evaluate_genomes
 
+NAME = "hopper-ga"
+
 
 def gait_summary(genome: np.ndarray, s: Settings) -> dict:
     """eval, gamma, E_r, E and the gait numbers of one genome (one cycle = one step)."""
@@ -108,3 +110,32 @@ def load_best(run_dir: Path) -> tuple[np.ndarray, dict]:
         state = load_checkpoint(ckpt, "hopper-ga")
         return state["best_genome"].numpy().astype(float), {}
     raise CharctlError(f"{run_dir} has no best_genome.json or checkpoint; train first: charctl train hopper-ga")
+
+
+def open_hopper_run(run_dir: Path, overrides: list[str] | None = None):
+    """(the re-opened run, its model Settings); a one-line error for a run of another experiment."""
+    from charctl.experiments.hopper_ga.config import Config
+    from charctl.experiments.hopper_ga.model import settings_from_config
+    from charctl.runs import open_run
+
+    run = open_run(run_dir, Config, overrides or [])
+    if run.experiment != NAME:
+        raise CharctlError(f"{run_dir} is a {run.experiment!r} run, not hopper-ga")
+    return run, settings_from_config(run.cfg)
+
+
+def run_dirs(targets: list[str], overrides: list[str] | tuple[str, ...] = ()) -> list[Path]:
+    """Run directories from targets: a run, a folder of runs, or the experiment name (its latest run)."""
+    from charctl.experiments import latest_run_dir
+
+    dirs: list[Path] = []
+    for t in targets:
+        if t == NAME:
+            dirs.append(latest_run_dir(NAME, overrides))
+            continue
+        p = Path(t)
+        runs = sorted(q.parent for q in p.glob("*/config.yaml")) if not (p / "config.yaml").is_file() else [p]
+        if not runs:
+            raise CharctlError(f"{t} is not a hopper-ga run directory (nor a folder of runs)")
+        dirs += runs
+    return dirs

@@ -9,7 +9,7 @@ one seeded random stream) follows the same trajectory for the same seed.
 
 from __future__ import annotations
 
-from typing import Callable
+from collections.abc import Callable
 
 import numpy as np
 

@@ -51,10 +51,11 @@ def train(cfg, run) -> dict:
         "speed": s.speed, "beta": s.beta, "generations_done": state.generation, "finished": finished,
         "best_eval": state.best_fitness, **{k: v for k, v in outputs["gait"].items() if k != "eval"},
         "runtime": str(cfg.runtime.kind), "workers": int(cfg.runtime.workers),
-        "ga_wall_s": wall, "eval_wall_s": state.eval_seconds, "evaluations": state.evaluations,
+        "wall_s": wall, "eval_wall_s": state.eval_seconds, "evaluations": state.evaluations,
         "limp": outputs["limp"], "best_genome": dict(zip(s.gene_names, np.round(state.best_genome, 6).tolist())),
     }
     run.write_metrics(metrics)
-    if not finished:
-        print(f"stopped after generation {state.generation}/{generations}; continue with: charctl train hopper-ga --resume {run.dir}")
-    return {k: metrics[k] for k in ("best_eval", "gamma", "E_r", "step_length_m", "flight_time_s", "cadence_spm", "ga_wall_s", "runtime")}
+    if stop.requested:  # Ctrl-C / SIGTERM: the generation's checkpoint and the outputs so far are written
+        raise stop.interrupted(f"interrupted at generation {state.generation}/{generations}: checkpoint written; "
+                               f"continue with --resume {run.dir}")
+    return {k: metrics[k] for k in ("best_eval", "gamma", "E_r", "step_length_m", "flight_time_s", "cadence_spm", "wall_s", "runtime")}

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from charctl.experiments.motion_matching.search import LARGE_BOX, SMALL_BOX  # compile-time constants
+from charctl.experiments.motion_matching.boxes import LARGE_BOX, SMALL_BOX  # compile-time constants
 
 # reassociation/contraction let the compiler vectorise the sums; no 'nnan'/'ninf' (costs compare to BIG)
 _FAST = {"nsz", "arcp", "contract", "afn", "reassoc"}

@@ -11,7 +11,6 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
-
 from scipy.spatial.transform import Rotation
 
 from charctl.errors import CharctlError

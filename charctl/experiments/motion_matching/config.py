@@ -1,4 +1,4 @@
-"""Config schema of `motion-matching` (SPEC §4; paper: motion_matching_feature_vectors.txt).
+"""Config schema of `motion-matching` (docs/motion-matching.md: the method, the paper's Table 1, the decisions).
 
 Frame counts in `features.*` and `runtime.*` are *paper frames*: frames at `frame_unit_hz`
 (120 Hz, the rate of the paper's capture data). They are converted to database frames with
@@ -10,6 +10,9 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from charctl.config import BaseConfig
+from charctl.errors import CharctlError
+
+NAME = "motion-matching"
 
 DEFAULT_CLIPS = [
     "walker/walk_forward", "walker/turn_left0", "walker/turn_left1", "walker/turn_right0",
@@ -108,6 +111,7 @@ class SweepConfig:
 
 @dataclass
 class Config(BaseConfig):
+    DEVICES = ("cpu",)  # numpy only: device=cuda is refused (charctl.config.check_device_name), auto = cpu
     experiment: str = "motion-matching"
     path: str = "star"  # circle | square | star | FILE.csv (x,z waypoints, metres)
     case: str = ""  # "" = use features.*; "1".."19" = a Table 1 case; "best" = best case of the latest sweep
@@ -153,3 +157,16 @@ class Config(BaseConfig):
         if d.bvh_forward not in ("auto", "+x", "-x", "+z", "-z"):
             return f"data.bvh_forward must be auto, +x, -x, +z or -z, got {d.bvh_forward!r}"
         return None
+
+
+def load_config(targets: list[str], overrides: list[str]):
+    """The config of a run directory (if one is given) or the composed experiment config."""
+    from charctl.config import compose_config
+    from charctl.runs import open_run
+
+    runs = [t for t in targets if t != NAME]
+    if len(runs) > 1:
+        raise CharctlError("motion-matching evaluates one run directory (or the experiment name) at a time")
+    if runs:
+        return open_run(runs[0], Config, overrides).cfg
+    return compose_config(NAME, overrides, Config)

@@ -24,10 +24,16 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from charctl.errors import CharctlError
-from charctl.motion import rotations as R
 from charctl.experiments.motion_matching.sources import (
-    SkeletonInfo, SourceMotion, continuous_sign, heading_of, load_sources, rotate_ground, wrap_angle,
+    SkeletonInfo,
+    SourceMotion,
+    continuous_sign,
+    heading_of,
+    load_sources,
+    rotate_ground,
+    wrap_angle,
 )
+from charctl.motion import rotations as R
 
 POSE_BLOCKS = ("root_height", "root_tilt", "end_pos", "end_vel")
 

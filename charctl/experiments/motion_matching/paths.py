@@ -179,3 +179,15 @@ def path_errors(path: TargetPath, ground: np.ndarray, speed: float, dt: float) -
         "e_time_mean": float(e_time.mean()), "e_time_std": float(e_time.std()),
         "e_near_mean": float(e_near.mean()), "e_near_std": float(e_near.std()),
     }
+
+
+def draw_paths(ax, path, ground: np.ndarray) -> None:
+    """Target (dashed) and generated root path (solid) seen from above (x right, z down)."""
+    ax.plot(path.points[:, 0], path.points[:, 1], "k--", lw=1.0, label="target")
+    ax.plot(ground[:, 0], ground[:, 1], "-", color="tab:red", lw=1.2, label="generated")
+    ax.plot(ground[:1, 0], ground[:1, 1], "o", color="tab:red", ms=4)
+    ax.set_aspect("equal")
+    ax.invert_yaxis()
+    ax.set_xlabel("x (m)")
+    ax.set_ylabel("z (m)")
+    ax.legend(fontsize=7, loc="best")

@@ -18,7 +18,9 @@ import numpy as np
 
 from charctl.experiments.motion_matching.database import Database, paper_frames
 from charctl.experiments.motion_matching.inertialization import (
-    apply_rotation_offset, decay_offsets, rotation_offset,
+    apply_rotation_offset,
+    decay_offsets,
+    rotation_offset,
 )
 from charctl.experiments.motion_matching.paths import TargetPath, path_duration
 from charctl.experiments.motion_matching.search import search

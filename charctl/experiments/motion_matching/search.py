@@ -15,15 +15,13 @@ current frame (same clip, phase distance < k; circular for unrolled loops):
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable
 
 import numpy as np
 
+from charctl.experiments.motion_matching.boxes import LARGE_BOX, SMALL_BOX, box_bounds
 from charctl.experiments.motion_matching.database import Database
-
-SMALL_BOX = 16  # rows per small box
-LARGE_BOX = 64  # rows per large box (a multiple of SMALL_BOX)
 
 
 @dataclass
@@ -98,8 +96,8 @@ class BBoxIndex:
     def __init__(self, feats: np.ndarray, info: RowInfo):
         self.feats = np.ascontiguousarray(feats, dtype=float)
         self.info = info
-        self.small_lo, self.small_hi = _boxes(self.feats, SMALL_BOX)
-        self.large_lo, self.large_hi = _boxes(self.feats, LARGE_BOX)
+        self.small_lo, self.small_hi = box_bounds(self.feats, SMALL_BOX)
+        self.large_lo, self.large_hi = box_bounds(self.feats, LARGE_BOX)
         self.clip = np.ascontiguousarray(info.clip, dtype=np.int64)
         self.phase = np.ascontiguousarray(info.phase, dtype=float)
         self.period = np.ascontiguousarray(info.period, dtype=float)
@@ -114,29 +112,11 @@ class BBoxIndex:
         return int(i), float(d)
 
 
-def _boxes(feats: np.ndarray, size: int) -> tuple[np.ndarray, np.ndarray]:
-    """Per-column min/max over runs of `size` consecutive rows."""
-    n, d = feats.shape
-    nb = -(-n // size)
-    pad = nb * size - n
-    padded = np.concatenate([feats, np.repeat(feats[-1:], pad, axis=0)]) if pad else feats
-    grouped = padded.reshape(nb, size, d)
-    return np.ascontiguousarray(grouped.min(axis=1)), np.ascontiguousarray(grouped.max(axis=1))
-
-
 def _bbox_kernel():
     """The compiled bounding-box search (numba; compiled once and cached on disk)."""
     from charctl.experiments.motion_matching._bbox_numba import bbox_search
 
     return bbox_search
-
-
-def numba_available() -> bool:
-    try:
-        import numba  # noqa: F401
-    except ImportError:
-        return False
-    return True
 
 
 INDEXES: dict[str, Callable[[np.ndarray, RowInfo], object]] = {
@@ -147,15 +127,7 @@ INDEXES: dict[str, Callable[[np.ndarray, RowInfo], object]] = {
 
 
 def make_index(kind: str, db_or_feats, info: RowInfo | None = None):
-    """An index of `kind` over a database's searchable rows (or raw (M, D) rows plus their RowInfo).
-
-    Without numba, `bbox` falls back to `kdtree` (same answers, slower) with a one-line note.
-    """
-    if kind == "bbox" and not numba_available():
-        import sys
-
-        print("note: runtime.index=bbox needs numba (pip install numba); using the kd-tree", file=sys.stderr)
-        kind = "kdtree"
+    """An index of `kind` over a database's searchable rows (or raw (M, D) rows plus their RowInfo)."""
     if isinstance(db_or_feats, Database):
         return INDEXES[kind](db_or_feats.search_features, row_info(db_or_feats))
     if info is None:

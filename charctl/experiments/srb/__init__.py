@@ -1,30 +1,26 @@
-"""srb: single-rigid-body walker driven by a QP contact-force tracker and a PPO policy (SPEC §2).
+"""srb: single-rigid-body walker driven by a QP contact-force tracker and a PPO policy.
 
-Light entry points only; the work happens in the submodules (imported on use).
+Declaration only (no torch/mujoco import); the work happens in the submodules, loaded on use.
 """
 
 from __future__ import annotations
 
+from charctl.experiments import EPISODES, OUT, SECONDS, VIDEO, Experiment, Option
 
-def schema() -> type:
-    from charctl.experiments.srb.config import Config
+_PKG = "charctl.experiments.srb"
 
-    return Config
-
-
-def train(cfg, run) -> dict:
-    from charctl.experiments.srb.trainer import train as _train
-
-    return _train(cfg, run)
-
-
-def evaluate(targets, options, overrides) -> None:
-    from charctl.experiments.srb.study import evaluate as _evaluate
-
-    _evaluate(targets, options, overrides)
-
-
-def export(target, options, overrides) -> None:
-    from charctl.experiments.srb.study import export as _export
-
-    _export(target, options, overrides)
+EXPERIMENT = Experiment(
+    name="srb",
+    summary="single rigid body + QP contact-force tracker + PPO; push-robustness study",
+    schema=f"{_PKG}.config:Config",
+    train=f"{_PKG}.train:train",
+    evaluate=f"{_PKG}.evaluate:evaluate",
+    export=f"{_PKG}.export:export",
+    eval_options=(
+        Option("push", "push-robustness study (paper §9, Table 1); a second run = the full-body baseline", mode=True),
+        EPISODES,
+        OUT,
+    ),
+    export_options=(VIDEO, SECONDS),
+    eval_accepts=("push_rollout",),
+)

@@ -1,7 +1,7 @@
-"""Structured config of the srb experiment (SPEC §2, shared/papers/srb_single_rigid_body_qp_rl.txt).
+"""Structured config of the srb experiment (docs/srb.md: method, the paper's numbers, decisions).
 
-Values here are defaults; the paper's numbers are repeated (with the section they come from) in
-conf/experiment/srb.yaml and the scale presets live in conf/preset/srb/. Decisions where the paper
+The defaults here are the paper's values (each stated once, with the section it comes from);
+conf/preset/srb/<scale>.yaml state only what a scale changes. Decisions where the paper
 is silent or garbled are marked "decision" and explained in docs/srb.md.
 """
 
@@ -124,9 +124,11 @@ class TrainConfig:
 
 
 def default_ppo() -> PPOConfig:
-    """Paper §5/§8: 4 x 64 tanh, m = 1024, n = 256, gamma 0.995, lambda 0.95, eps 0.2, lr 1e-4."""
-    return PPOConfig(lr=1e-4, gamma=0.995, lam=0.95, clip=0.2, epochs=5, minibatch_size=256, hidden=[64, 64, 64, 64],
-                     activation="tanh", action_std=0.3, learn_std=False, value_coef=0.5, max_grad_norm=1.0)
+    """Paper §5/§8: 4 x 64 tanh, m = 1024 (train.num_envs x train.rollout_steps), n = 256, gamma 0.995,
+    lr 1e-4; lambda 0.95 and eps 0.2 are also the paper's and PPOConfig's defaults. Decisions (paper
+    silent, docs/srb.md): a fixed Gaussian std of 0.3 policy units; 5 epochs, value weight 0.5 and
+    grad-norm 1 as PPOConfig."""
+    return PPOConfig(lr=1e-4, gamma=0.995, minibatch_size=256, hidden=[64, 64, 64, 64], activation="tanh", action_std=0.3)
 
 
 @dataclass

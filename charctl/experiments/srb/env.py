@@ -31,7 +31,13 @@ import numpy as np
 
 from charctl.experiments.srb import fastmath as F
 from charctl.experiments.srb.qp import N_POINTS, QPBatch, QPParams, solve_batch
-from charctl.experiments.srb.reference import Reference, box_half_extents, build_reference, composite_inertia, sole_points_local
+from charctl.experiments.srb.reference import (
+    Reference,
+    box_half_extents,
+    build_reference,
+    composite_inertia,
+    sole_points_local,
+)
 from charctl.motion import rotations as R
 
 OBS_DIM = 20
@@ -59,11 +65,6 @@ def make_body(clip, mass: float, frame: int = 0) -> Body:
 
 def heading_of(rot: np.ndarray) -> np.ndarray:
     return F.yaw_of(rot)
-
-
-def tilt_of(rot: np.ndarray) -> np.ndarray:
-    """Angle (radians) between the body's up axis and world up."""
-    return np.arccos(np.clip(F.up_y(rot), -1.0, 1.0))
 
 
 def wrap_angle(a: np.ndarray) -> np.ndarray:
@@ -110,7 +111,7 @@ class EnvParams:
     max_tilt: float  # radians
 
     @classmethod
-    def from_cfg(cls, cfg) -> "EnvParams":
+    def from_cfg(cls, cfg) -> EnvParams:
         t, a, td, r, term = cfg.tracking, cfg.action, cfg.touchdown, cfg.reward, cfg.termination
         return cls(kp=float(t.kp), kd=float(t.kd), acc_min=float(t.acc_min), acc_max=float(t.acc_max), substeps=int(t.substeps),
                    solver=str(t.solver), foot_mode=str(a.foot_mode), foot_offset=float(a.foot_offset), td_enabled=bool(td.enabled),

@@ -16,9 +16,9 @@ from __future__ import annotations
 
 import json
 import math
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Callable, Iterable, Sequence
 
 import numpy as np
 
@@ -106,7 +106,7 @@ SimulateBatch = Callable[[list[tuple[PushCase, int]]], list[bool]]
 
 
 def run_push_study(simulate_case: SimulateCase | None, cases: Sequence[PushCase], trials: int, seed: int = 0,
-                   simulate_batch: SimulateBatch | None = None, label: str = "", progress: bool = True) -> "PushTable":
+                   simulate_batch: SimulateBatch | None = None, label: str = "", progress: bool = True) -> PushTable:
     """Run K = `trials` trials of every case; trial k uses seed `seed + k` for every case (paired trials).
 
     Give `simulate_case` (called once per case and trial) or `simulate_batch` (called once with
@@ -177,10 +177,6 @@ class PushTable:
     def to_dict(self) -> dict:
         return {"label": self.label, "cases": [asdict(c) for c in self.cases], "outcomes": self.outcomes.astype(int).tolist(),
                 "cells": self.cells(), "by_direction": self.by_direction(), "meta": self.meta}
-
-    @classmethod
-    def from_dict(cls, d: dict) -> "PushTable":
-        return cls(label=d["label"], cases=[PushCase(**c) for c in d["cases"]], outcomes=np.array(d["outcomes"], dtype=bool), meta=d.get("meta", {}))
 
 
 # ---------------------------------------------------------------------------- reporting

@@ -26,8 +26,8 @@ ub = 0, so every environment has the same 16 + 3 variables.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable
 
 import numpy as np
 

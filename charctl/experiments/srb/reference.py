@@ -281,7 +281,7 @@ def build_reference(clip, contact_height: float = 0.03, contact_speed: float = 1
     c = stance.shape[0]
     for j, foot in enumerate(("right", "left")):
         if stance[:, j].all() or not stance[:, j].any():
-            raise CharctlError(f"clip {clip.name!r}: the {foot} foot never {'lifts off' if stance[:, j].all() else 'touches down'}; srb needs a walking clip")
+            raise CharctlError(f"clip {clip.name!r}: the {foot} foot never " f"{'lifts off' if stance[:, j].all() else 'touches down'}; srb needs a walking clip")
     sole = sole_points_world(clip)
     if clip.loop:
         yaw0, yaw1 = R.yaw_about_y(clip.local_rot[[0, c], 0])

@@ -1,5 +1,6 @@
-"""Video of the trained SRB: the box, its feet (contact points) and the contact forces as arrows,
-walking and being pushed (the push drawn as a red arrow at the COM).
+"""`charctl export SRB_RUN --video FILE`: video of the trained SRB, the box, its feet (contact
+points) and the contact forces as arrows, walking and being pushed (the push drawn as a red arrow
+at the COM).
 
 MuJoCo is used only to draw: a model with three free bodies (box, right foot, left foot) is posed
 kinematically from the recorded trajectory (no MuJoCo dynamics) and rendered with
@@ -12,8 +13,11 @@ from pathlib import Path
 
 import numpy as np
 
-from charctl.sim.scene import scene_assets, scene_ground
+from charctl.errors import CharctlError
+from charctl.experiments import latest_run_dir
 from charctl.experiments.srb.push import PushCase
+from charctl.experiments.srb.rollout import simulate_chunk
+from charctl.sim.scene import scene_assets, scene_ground
 
 FORCE_SCALE = 1.0 / 500.0  # m of arrow per newton (a 60 kg body's weight ~ 1.2 m)
 
@@ -22,7 +26,8 @@ def srb_mjcf(half_extents: np.ndarray, foot_half_length: float) -> str:
     hx, hy, hz = half_extents
     fl = foot_half_length
     feet = "".join(
-        f'<body name="{name}" pos="0 0 0"><freejoint/><geom type="box" size="{fl:.4f} 0.02 0.045" rgba="{rgba}" contype="0" conaffinity="0"/></body>'
+        f'<body name="{name}" pos="0 0 0"><freejoint/>'
+        f'<geom type="box" size="{fl:.4f} 0.02 0.045" rgba="{rgba}" contype="0" conaffinity="0"/></body>'
         for name, rgba in (("right_foot", "0.85 0.45 0.35 1"), ("left_foot", "0.35 0.55 0.85 1"))
     )
     return f"""<mujoco model="srb">
@@ -54,8 +59,8 @@ def trace_to_qpos(trace: dict, env_index: int = 0) -> np.ndarray:
         d = toe - heel
         yaw = np.arctan2(-d[:, 2], d[:, 0])
         s = 7 + 7 * j
-        q[:, s:s + 3] = mid
-        q[:, s + 3:s + 7] = np.stack([np.cos(yaw / 2), np.zeros(t), np.sin(yaw / 2), np.zeros(t)], axis=1)
+        q[:, s : s + 3] = mid
+        q[:, s + 3 : s + 7] = np.stack([np.cos(yaw / 2), np.zeros(t), np.sin(yaw / 2), np.zeros(t)], axis=1)
     return q
 
 
@@ -65,7 +70,9 @@ def _arrow(scene, start: np.ndarray, end: np.ndarray, rgba, width: float = 0.025
     if scene.ngeom >= scene.maxgeom or np.linalg.norm(end - start) < 1e-4:
         return
     g = scene.geoms[scene.ngeom]
-    mujoco.mjv_initGeom(g, mujoco.mjtGeom.mjGEOM_ARROW, np.zeros(3), np.zeros(3), np.eye(3).ravel(), np.asarray(rgba, dtype=np.float32))
+    mujoco.mjv_initGeom(
+        g, mujoco.mjtGeom.mjGEOM_ARROW, np.zeros(3), np.zeros(3), np.eye(3).ravel(), np.asarray(rgba, dtype=np.float32)
+    )
     mujoco.mjv_connector(g, mujoco.mjtGeom.mjGEOM_ARROW, width, start.astype(float), end.astype(float))
     scene.ngeom += 1
 
@@ -77,14 +84,15 @@ def render_push_video(run, path: str | Path, seconds: float = 6.0) -> dict:
     import mujoco
 
     from charctl.experiments.srb.env import SRBEnv
-    from charctl.experiments.srb.study import _simulate_chunk
-    from charctl.experiments.srb.trainer import load_policy, policy_actions
+    from charctl.experiments.srb.train import load_policy, policy_actions
     from charctl.viz.video import render_qpos
 
     agent, _ = load_policy(run)
     env = SRBEnv(run.cfg, 1, seed=0, auto_reset=False, max_steps=10**9)
-    first = PushCase("impulse", 400.0, 0.2, 90.0, 0.25, settle_s=1.5, observe_s=max(seconds - 1.5 - 0.2 - env.ref.cycle_seconds, 0.5))
-    _, trace = _simulate_chunk(env, agent.model, [(first, 0)], 0.0, policy_actions, record=True, seconds=seconds)
+    first = PushCase(
+        "impulse", 400.0, 0.2, 90.0, 0.25, settle_s=1.5, observe_s=max(seconds - 1.5 - 0.2 - env.ref.cycle_seconds, 0.5)
+    )
+    _, trace = simulate_chunk(env, agent.model, [(first, 0)], 0.0, policy_actions, record=True, seconds=seconds)
     model = mujoco.MjModel.from_xml_string(srb_mjcf(env.body.half_extents, env.body.foot_half_length))
     qpos = trace_to_qpos(trace)
 
@@ -99,5 +107,25 @@ def render_push_video(run, path: str | Path, seconds: float = 6.0) -> dict:
 
     info = render_qpos(model, qpos, path, fps=1.0 / float(trace["dt"]), camera="side", annotate=annotate)
     start = float(trace["start"][0])
-    info["pushes"] = f"{first.force_n:.0f} N to the left for {first.duration_s:g} s at t = {start:.2f} s" if np.isfinite(start) else "none (video shorter than the push onset)"
+    info["pushes"] = (
+        f"{first.force_n:.0f} N to the left for {first.duration_s:g} s at t = {start:.2f} s"
+        if np.isfinite(start)
+        else "none (video shorter than the push onset)"
+    )
     return info
+
+
+def export(target: str, options: dict, overrides: list[str]) -> None:
+    """`--video FILE [--seconds S]`: the trained SRB walking and being pushed."""
+    if not options.get("video"):
+        raise CharctlError("srb exports --video (the box, its feet and contact forces walking and being pushed)")
+    from charctl.experiments.srb.config import Config
+    from charctl.runs import open_run
+
+    run_dir = latest_run_dir("srb", overrides) if target == "srb" else Path(target)
+    run = open_run(run_dir, Config, overrides)
+    seconds = float(options.get("seconds") or 6.0)
+    if seconds <= 0:
+        raise CharctlError("--seconds must be positive")
+    info = render_push_video(run, options["video"], seconds)
+    print(f"wrote {options['video']} ({info['frames']} frames, pushes: {info['pushes']})")

@@ -21,11 +21,11 @@ from charctl.rl.ppo import PPO, ActorCritic, PPOConfig
 from charctl.rl.storage import RolloutStorage
 
 
-def ppo_config(cfg) -> PPOConfig:
-    """The PPOConfig dataclass from the (OmegaConf) ppo section."""
+def ppo_config(section) -> PPOConfig:
+    """The PPOConfig dataclass from the (OmegaConf) `ppo` section of the config."""
     from omegaconf import OmegaConf
 
-    return PPOConfig(**OmegaConf.to_container(cfg.ppo, resolve=True)) if not isinstance(cfg.ppo, PPOConfig) else cfg.ppo
+    return section if isinstance(section, PPOConfig) else PPOConfig(**OmegaConf.to_container(section, resolve=True))
 
 
 @dataclass
@@ -55,7 +55,7 @@ class Agent:
 
 def build_agent(cfg) -> Agent:
     torch.manual_seed(int(cfg.seed))
-    pcfg = ppo_config(cfg)
+    pcfg = ppo_config(cfg.ppo)
     model = ActorCritic(OBS_DIM, ACT_DIM, pcfg)
     gen = torch.Generator().manual_seed(int(cfg.seed) + 1)
     return Agent(model=model, ppo=PPO(model, pcfg, generator=gen))

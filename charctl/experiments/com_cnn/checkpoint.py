@@ -1,0 +1,63 @@
+"""A trained com-cnn run loaded from its directory: config, data, network (used by evaluation and export)."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+from charctl.errors import CharctlError
+from charctl.experiments.com_cnn.data import BodyModel, Sequence, load_sequences
+from charctl.experiments.com_cnn.rollout import CnnPredictor
+
+
+@dataclass
+class LoadedRun:
+    dir: Path
+    cfg: object
+    model: object
+    body: BodyModel
+    seqs: list[Sequence]
+    metrics: dict
+    suffix: str = ""  # tells apart runs whose settings read the same
+
+    @property
+    def label(self) -> str:
+        m, d = self.cfg.model, self.cfg.data
+        kind = "CNN, history + COM" if m.use_com else "CNN, history only"
+        extra = "".join(f", {k}={v}" for k, v in (("fc", m.fc_activation), ("opt", self.cfg.train.optimizer)) if v not in ("none", "sgd"))
+        return f"{kind} (i={d.history}, w={m.kernel}, " f"ch={'/'.join(str(c) for c in m.channels)}, {d.frame}{extra}){self.suffix}"
+
+    def predictor(self) -> CnnPredictor:
+        return CnnPredictor(self.label, self.model, int(self.cfg.data.history), str(self.cfg.data.frame))
+
+
+def load_run(run_dir: str | Path, overrides: list[str] | None = None, device: str = "cpu") -> LoadedRun:
+    """Config, data and trained network of a com-cnn run directory."""
+    import torch
+
+    from charctl.experiments.com_cnn.config import Config
+    from charctl.experiments.com_cnn.model import build_model, model_signature
+    from charctl.runs import open_run
+
+    run = open_run(run_dir, Config, overrides)
+    if run.experiment != "com-cnn":
+        raise CharctlError(f"{run_dir} is a {run.experiment!r} run, not com-cnn")
+    if not run.has_checkpoint():
+        raise CharctlError(f"{run_dir} has no checkpoint (checkpoints/last.pt): train it first")
+    torch.set_num_threads(int(run.cfg.train.torch_threads))
+    seqs, body = load_sequences(run.cfg)
+    state = run.load_checkpoint(model_signature(run.cfg, body.pose_dim))
+    model = build_model(run.cfg, body.pose_dim)
+    model.load_state_dict(state["model"])
+    model.eval().to(device)
+    metrics_path = Path(run_dir) / "metrics.json"
+    metrics = json.loads(metrics_path.read_text()) if metrics_path.is_file() else {}
+    return LoadedRun(Path(run_dir), run.cfg, model, body, seqs, metrics)
+
+
+def resolve_targets(targets: list[str], overrides: list[str] | tuple[str, ...] = ()) -> list[Path]:
+    """Run directories; the experiment name stands for its latest run under the configured output_root."""
+    from charctl.experiments import latest_run_dir
+
+    return [latest_run_dir("com-cnn", overrides) if t == "com-cnn" else Path(t) for t in targets]

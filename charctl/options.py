@@ -1,0 +1,62 @@
+"""Checks of the command-line options of `charctl eval` / `charctl export`, run before any work and
+before anything is written: numbers in range (no nan / inf), output files writable.
+
+    from charctl.options import check_options
+    check_options(options)          # options: the dict the CLI builds, e.g. {"fps": 60.0, "bvh": Path(...)}
+
+Declared once here for every experiment; an option that is None / False (not given) is not checked.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Any
+
+from charctl.errors import CharctlError
+
+# option name -> (bound, limit): the value must be > / >= the limit
+NUMBER_RULES: dict[str, tuple[str, float]] = {
+    "fps": (">", 0.0),
+    "seconds": (">", 0.0),
+    "crouch_at": (">=", 0.0),
+    "episodes": (">=", 1),
+    "survival": (">", 0.0),
+}
+# options that name a file charctl writes
+OUTPUT_FILES = ("output", "bvh", "video", "onnx", "torchscript")
+
+
+def flag(name: str) -> str:
+    short = {"episodes": "--episodes/-k", "output": "-o/--output", "out": "-o/--out"}
+    return short.get(name, "--" + name.replace("_", "-"))
+
+
+def check_numbers(options: dict[str, Any]) -> None:
+    for name, (bound, limit) in NUMBER_RULES.items():
+        value = options.get(name)
+        if value is None or isinstance(value, bool):
+            continue
+        if not isinstance(value, (int, float)) or not math.isfinite(value):
+            raise CharctlError(f"{flag(name)} must be a finite number, got {value}")
+        ok = value > limit if bound == ">" else value >= limit
+        if not ok:
+            raise CharctlError(f"{flag(name)} must be {bound} {limit:g}, got {value:g}")
+
+
+def check_outputs(options: dict[str, Any]) -> None:
+    from charctl.runs import check_output_file, check_writable_dir
+
+    for name in OUTPUT_FILES:
+        value = options.get(name)
+        if value:
+            check_output_file(Path(value), flag(name))
+    out = options.get("out")
+    if out:
+        check_writable_dir(Path(out), flag("out"))
+
+
+def check_options(options: dict[str, Any]) -> None:
+    """Every eval/export option value in range and every output writable; one-line errors."""
+    check_numbers(options)
+    check_outputs(options)

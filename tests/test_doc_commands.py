@@ -1,0 +1,311 @@
+"""Every `charctl ...` command in README.md and docs/*.md works as written.
+
+The commands are extracted from the fenced code blocks and inline code spans of the pages, then:
+
+- fast (every `make test`): each `charctl train` command's config - every job of a `-m` sweep - is
+  composed and validated exactly as written (`charctl config EXP job...`), and the cheap commands
+  (`data`, `config`, `export bvh`) run as written;
+- slow (`make test-slow`): every command runs through the real CLI at smoke scale: `scale=smoke`
+  appended to train and experiment-level eval/export commands, run placeholders (RUN, RUN_CGAIL,
+  outputs/srb/<run>, ...) replaced by smoke runs made for the purpose, optional `[...]` parts dropped,
+  `--seconds` and `-k` shrunk. Commands that need the user's own data, a Ray cluster or a display say
+  so and are skipped (`play` without a display must still fail with its one-line error).
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import shlex
+import shutil
+from dataclasses import dataclass
+from pathlib import Path
+
+import pytest
+
+from conftest import REPO, assert_one_line_error, cli_env, run_charctl
+
+PAGES = [REPO / "README.md", *sorted((REPO / "docs").glob("*.md"))]
+EXPERIMENTS = ("cgail", "srb", "com-cnn", "motion-matching", "hopper-ga")
+RUN_PLACEHOLDERS = {"RUN", "RUN_CGAIL", "RUN_AMP", "CGAIL", "AMP", "SRB_RUN", "CGAIL_RUN", "RUN...", "<run>"}
+
+
+@dataclass(frozen=True)
+class DocCommand:
+    page: str  # README.md, docs/srb.md
+    line: int
+    text: str  # as written, comment removed
+    inline: bool = False  # from a `code span` in prose rather than a code block
+
+    @property
+    def id(self) -> str:
+        return f"{self.page}:{self.line}"
+
+    @property
+    def argv(self) -> list[str]:
+        return shlex.split(_named_placeholders(self.text))[1:]
+
+    @property
+    def page_experiment(self) -> str | None:
+        stem = Path(self.page).stem
+        return stem if stem in EXPERIMENTS else None
+
+
+def _strip_comment(line: str) -> str:
+    """The command without a trailing `# comment` (a '#' outside quotes preceded by a space)."""
+    quote = None
+    for i, ch in enumerate(line):
+        if quote:
+            quote = None if ch == quote else quote
+        elif ch in "\"'":
+            quote = ch
+        elif ch == "#" and (i == 0 or line[i - 1].isspace()):
+            return line[:i].rstrip()
+    return line.rstrip()
+
+
+def doc_commands() -> list[DocCommand]:
+    out: list[DocCommand] = []
+    for page in PAGES:
+        rel = str(page.relative_to(REPO))
+        in_block = False
+        for no, raw in enumerate(page.read_text().splitlines(), 1):
+            if raw.lstrip().startswith("```"):
+                in_block = not in_block
+                continue
+            if in_block:
+                line = raw.strip().removeprefix("$ ")
+                if line.startswith("charctl "):
+                    out.append(DocCommand(rel, no, _strip_comment(line)))
+            else:
+                for span in re.findall(r"`(charctl [^`]+)`", raw):
+                    out.append(DocCommand(rel, no, span.strip(), inline=True))
+    return out
+
+
+COMMANDS = doc_commands()
+
+
+def skip_reason(cmd: DocCommand) -> str | None:
+    """Why a command cannot run here as written (placeholders for the user's own things), or None."""
+    text = cmd.text
+    if "..." in text.replace("RUN...", "RUN") and "[" not in text:
+        return "an abbreviated form in prose, not a command"
+    if "~/" in text or "data.bvh_dir=" in text:
+        return "needs the user's own BVH folder"
+    if "runtime.address=" in text:
+        return "joins a running Ray cluster"
+    if len(cmd.argv) < 2 and cmd.argv[:1] != ["play"]:
+        return "names a command, not a command line"
+    if cmd.inline and all(a.startswith("-") for a in cmd.argv[1:]):
+        return "names a command and its flag in prose, not a command line"
+    return None
+
+
+def _named_placeholders(text: str) -> str:
+    """`<srb run>` -> SRB_RUN, `<AMP walk run>` / `<cgail AMP walk run>` -> RUN_AMP (no spaces in a token)."""
+    text = re.sub(r"<[^>]*srb[^>]*>", "SRB_RUN", text)
+    return re.sub(r"<[^>]*(AMP|cgail)[^>]*>", "RUN_AMP", text)
+
+
+def needs_missing_gpu(cmd: DocCommand) -> bool:
+    if "device=cuda" not in cmd.text:
+        return False
+    import torch
+
+    return not torch.cuda.is_available()
+
+
+# ---------------------------------------------------------------------------- fast tier
+def _jobs(argv: list[str]) -> tuple[str, list[list[str]]] | None:
+    """(experiment, [overrides of each job]) of a `train` command without --resume, else None."""
+    from charctl.config import expand_multirun
+
+    if len(argv) < 2 or argv[0] != "train" or "--resume" in argv:
+        return None
+    multirun = "-m" in argv or "--multirun" in argv
+    overrides = [a for a in argv[2:] if a not in ("-m", "--multirun")]
+    return argv[1], (expand_multirun(overrides) if multirun else [overrides])
+
+
+TRAIN_COMMANDS = [c for c in COMMANDS if _jobs(c.argv) and not skip_reason(c)]
+
+
+def test_the_pages_have_commands():
+    assert len(COMMANDS) >= 20 and TRAIN_COMMANDS
+
+
+@pytest.mark.parametrize("cmd", TRAIN_COMMANDS, ids=[c.id for c in TRAIN_COMMANDS])
+def test_train_command_config_is_valid_as_written(cmd, charctl_main):
+    if needs_missing_gpu(cmd):
+        pytest.skip("a GPU command (device=cuda) on a machine without CUDA")
+    experiment, jobs = _jobs(cmd.argv)
+    for job in jobs:
+        res = charctl_main("config", experiment, *job)
+        assert res.returncode == 0, f"{cmd.text!r} (job {' '.join(job)}) in {cmd.id}: {res.stderr.strip()}"
+
+
+CHEAP = [
+    c
+    for c in COMMANDS
+    if not skip_reason(c) and (c.argv[:1] in (["data"], ["config"]) or c.argv[:2] == ["export", "bvh"])
+]
+
+
+@pytest.mark.parametrize("cmd", CHEAP, ids=[c.id for c in CHEAP])
+def test_cheap_command_runs_as_written(cmd, tmp_path):
+    res = run_charctl(*cmd.argv, cwd=tmp_path)
+    assert res.returncode == 0, f"{cmd.text!r} in {cmd.id}: {res.stderr.strip()}"
+    assert "Traceback" not in res.stderr
+
+
+# ---------------------------------------------------------------------------- slow tier
+SMOKE_RUNS = {
+    # the skills the pages' cgail commands name (walk, run, right_kick); AMP = the unconditional baseline
+    "cgail": ["train", "cgail", "scale=smoke", "use_skills=[walk,run,right_kick]"],
+    "cgail-amp": ["train", "cgail", "scale=smoke", "use_skills=[walk]", "cgail.conditional=false"],
+    "srb": ["train", "srb", "scale=smoke"],
+    "com-cnn": ["train", "com-cnn", "scale=smoke"],
+    "motion-matching": ["train", "motion-matching", "scale=smoke"],
+    "hopper-ga": ["train", "hopper-ga", "scale=smoke"],
+}
+
+
+@pytest.fixture(scope="module")
+def smoke_runs(tmp_path_factory):
+    """Lazily made smoke runs under <work>/outputs (so `charctl eval srb` finds the latest one)."""
+    work = tmp_path_factory.mktemp("doc-commands")
+    made: dict[str, Path] = {}
+
+    def get(kind: str) -> Path:
+        if kind not in made:
+            exp = SMOKE_RUNS[kind][1]
+            before = set((work / "outputs" / exp).glob("*"))
+            res = run_charctl(*SMOKE_RUNS[kind], f"output_root={work / 'outputs'}", cwd=work, timeout=600)
+            assert res.returncode == 0, res.stderr
+            (made[kind],) = set((work / "outputs" / exp).glob("*")) - before
+        return made[kind]
+
+    def copy(run: Path) -> Path:
+        """A fresh copy of a run (resuming it must not change the run other commands use)."""
+        n = len(list(run.parent.glob(run.name + "_copy*")))
+        dest = run.parent / f"{run.name}_copy{n}"
+        shutil.copytree(run, dest)
+        return dest
+
+    get.work = work
+    get.copy = copy
+    return get
+
+
+def _run_kind(token: str, cmd: DocCommand, position: int) -> str:
+    """Which smoke run a placeholder stands for."""
+    m = re.match(r"outputs/([a-z-]+)/", token)
+    if m:
+        return m.group(1)
+    if token in ("RUN_AMP", "AMP", "CGAIL_RUN"):
+        return "cgail-amp"
+    if token in ("RUN_CGAIL", "CGAIL"):
+        return "cgail"
+    if token == "SRB_RUN":
+        return "srb"
+    exp = cmd.page_experiment or "cgail"
+    return "cgail-amp" if exp == "cgail" and position > 0 else exp
+
+
+RUNNABLE = [c for c in COMMANDS if not skip_reason(c)]
+RESUME_TOTAL = {"cgail": 1024, "srb": 4096}  # resuming a finished smoke run needs a larger total
+
+
+def smoke_argv(cmd: DocCommand, runs, cwd: Path) -> list[str]:
+    """The command at smoke scale: placeholders -> smoke runs (a fresh copy for --resume), optional
+    `[...]` parts dropped, `--seconds` / `-k` shrunk to 1, scale=smoke and output_root appended."""
+    text = re.sub(r"(?<=\s)\[[^\]]*\]", "", _named_placeholders(cmd.text))  # optional "[-k 4]", "[RUN ...]"
+    argv = shlex.split(text)[1:]
+    resume = "--resume" in argv
+    out: list[str] = []
+    seen_runs = 0
+    skip_next = False
+    for tok in argv:
+        if skip_next:
+            skip_next = False
+            continue
+        is_run = tok in RUN_PLACEHOLDERS or (tok.startswith("outputs/") and tok.count("/") >= 2)
+        key, _, value = tok.partition("=")
+        if value in RUN_PLACEHOLDERS:  # push.baseline_run=RUN_AMP
+            out.append(f"{key}={runs(_run_kind(value, cmd, 1))}")
+        elif is_run:
+            run = runs(_run_kind(tok, cmd, seen_runs))
+            out.append(str(runs.copy(run) if resume else run))
+            seen_runs += 1
+        elif tok in ("--seconds", "-k", "--episodes"):
+            out += [tok, "1"]
+            skip_next = True
+        elif tok.startswith("train.total_samples="):
+            out.append("train.total_samples=8192")
+        else:
+            out.append(tok)
+    if "my_path.csv" in text:  # the user's path file, in the format the command reads
+        body = "t,x,y,z\n0,0,0.9,0\n1,1,0.9,0\n2,2,0.9,0.5\n" if "--com-path" in text else "x,z\n0,0\n2,0\n2,2\n0,2\n"
+        (cwd / "my_path.csv").write_text(body)
+    command = out[0] if out else ""
+    target = out[1] if len(out) > 1 else ""
+    if command == "train" and resume:
+        if target in RESUME_TOTAL and not any(a.startswith("train.total_samples=") for a in out):
+            out.append(f"train.total_samples={RESUME_TOTAL[target]}")
+    elif command == "train":
+        out += ["scale=smoke", f"output_root={runs.work / 'outputs'}"]
+    elif command in ("eval", "export") and target == "motion-matching":
+        out += ["scale=smoke", f"output_root={runs.work / 'outputs'}"]
+    elif command in ("eval", "export", "play") and target in EXPERIMENTS:
+        runs(target)  # the latest run of the experiment under <work>/outputs must exist
+    if command == "eval" and "-k" not in out and any(k in " ".join(out) for k in ("/cgail", "/srb", " srb", " cgail")):
+        out += ["-k", "1"]
+    return out
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("cmd", RUNNABLE, ids=[c.id for c in RUNNABLE])
+def test_doc_command_runs_at_smoke_scale(cmd, smoke_runs):
+    if needs_missing_gpu(cmd):
+        pytest.skip("a GPU command (device=cuda) on a machine without CUDA")
+    work = smoke_runs.work
+    argv = smoke_argv(cmd, smoke_runs, work)
+    if argv[0] == "play" and not os.environ.get("DISPLAY"):
+        if len(argv) == 1:
+            argv.append(str(smoke_runs("cgail")))
+        res = run_charctl(*argv, cwd=work)
+        assert res.returncode == 2, res.stderr
+        assert_one_line_error(res, "export", "--video")  # documented: needs a display, points to the video
+        return
+    res = run_charctl(*argv, cwd=work, env=cli_env(), timeout=900)
+    assert res.returncode == 0, f"{cmd.text!r} ({cmd.id}) as {' '.join(argv)}:\n{res.stderr[-2000:]}"
+    assert "Traceback" not in res.stderr
+
+
+def test_smoke_argv_substitutions(tmp_path):
+    """The rewriting itself (no run is made: placeholders resolve to fake paths)."""
+
+    def runs(kind: str) -> Path:
+        return Path(f"/runs/{kind}")
+
+    runs.work = tmp_path
+    runs.copy = lambda run: Path(f"{run}_copy")
+    cmd = DocCommand("docs/cgail.md", 1, "charctl eval RUN_CGAIL RUN_AMP --dtw [-k 4] [-o DIR] --switch walk run")
+    assert smoke_argv(cmd, runs, tmp_path) == [
+        "eval",
+        "/runs/cgail",
+        "/runs/cgail-amp",
+        "--dtw",
+        "--switch",
+        "walk",
+        "run",
+        "-k",
+        "1",
+    ]
+    cmd = DocCommand("docs/srb.md", 1, "charctl train srb --resume outputs/srb/<run> train.total_samples=3000000")
+    assert smoke_argv(cmd, runs, tmp_path) == ["train", "srb", "--resume", "/runs/srb_copy", "train.total_samples=8192"]
+    cmd = DocCommand("README.md", 1, "charctl train com-cnn -m data.history=45,90 model.kernel=2,5")
+    assert smoke_argv(cmd, runs, tmp_path)[-2:] == ["scale=smoke", f"output_root={tmp_path / 'outputs'}"]
+    line = 'charctl export RUN --commands "a:0,b:3"   # a # comment'
+    assert _strip_comment(line) == 'charctl export RUN --commands "a:0,b:3"'
