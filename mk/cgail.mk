@@ -4,12 +4,15 @@ CGAIL_PAPER := outputs/repro/cgail-paper
 
 .PHONY: repro-cgail-small repro-cgail-paper demo-cgail
 
-repro-cgail-small: install ## cgail: train cGAIL + AMP baseline at scale=small, evaluate, write outputs/repro/cgail-small/report.md
-	$(CHARCTL) train cgail scale=small output_root=$(CGAIL_SMALL)/cgail
-	$(CHARCTL) train cgail scale=small cgail.conditional=false output_root=$(CGAIL_SMALL)/amp
+repro-cgail-small: install ## cgail: the shipped policies' runs (pretrained/README.md: cGAIL 3 skills, AMP and tracking walk; ~3 h on 2 cores), evaluated
+	$(CHARCTL) train cgail scale=small train.total_samples=8000000 seed=1 output_root=$(CGAIL_SMALL)/cgail
+	$(CHARCTL) train cgail scale=small use_skills=[walk] cgail.conditional=false train.total_samples=2000000 seed=1 output_root=$(CGAIL_SMALL)/amp
+	$(CHARCTL) train cgail scale=small use_skills=[walk] cgail.conditional=false reward.kind=tracking train.total_samples=1500000 seed=1 output_root=$(CGAIL_SMALL)/tracking
 	C=$$(ls -d $(CGAIL_SMALL)/cgail/cgail/*/ | tail -1); A=$$(ls -d $(CGAIL_SMALL)/amp/cgail/*/ | tail -1); \
+	T=$$(ls -d $(CGAIL_SMALL)/tracking/cgail/*/ | tail -1); \
 	rm -f $(CGAIL_SMALL)/report.md; \
-	$(CHARCTL) eval $$C $$A --dtw --confusion --switch walk right_kick --curves -k 4 -o $(CGAIL_SMALL)
+	$(CHARCTL) eval $$C --survival 5 --confusion --switch walk right_kick --curves -k 8 -o $(CGAIL_SMALL) && \
+	$(CHARCTL) eval $$C $$A $$T --survival 10 --dtw -k 8 -o $(CGAIL_SMALL)
 	@echo "report: $(CGAIL_SMALL)/report.md"
 
 repro-cgail-paper: install ## cgail: the paper's runs (10 skills, AMP, LS ablation, 1/3/6 skills); GPU/cluster scale
@@ -23,8 +26,7 @@ repro-cgail-paper: install ## cgail: the paper's runs (10 skills, AMP, LS ablati
 	$(CHARCTL) eval $$C $$A $$L $(CGAIL_PAPER)/skills/cgail/*/ --curves -o $(CGAIL_PAPER)
 	@echo "report: $(CGAIL_PAPER)/report.md"
 
-demo-cgail: install ## cgail: a short training run (~5-10 min on 2 cores), its evaluation and a video
-	$(CHARCTL) train cgail scale=small train.total_samples=150000 output_root=outputs/demo
-	R=$$(ls -d outputs/demo/cgail/*/ | tail -1); \
-	$(CHARCTL) eval $$R --dtw --confusion --curves -k 2 -o outputs/demo/eval && \
-	$(CHARCTL) export $$R --video outputs/demo/cgail_rollout.mp4 --commands "walk:0,run:2,right_kick:4" --seconds 6
+demo-cgail: install ## cgail: a short training run (~2 min), then the shipped 3-skill policy evaluated and rendered switching walk -> run -> right_kick
+	$(CHARCTL) train cgail scale=small train.total_samples=100000 output_root=outputs/demo
+	$(CHARCTL) eval pretrained/cgail-3skill --survival 5 --confusion -k 4 -o outputs/demo/eval
+	$(CHARCTL) export pretrained/cgail-3skill --video outputs/demo/cgail_switch.mp4 --commands "walk:0,run:3,right_kick:6" --seconds 8
