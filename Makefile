@@ -35,7 +35,9 @@ render-deps: ## install the OSMesa library MuJoCo's offscreen renderer needs (De
 	  || echo "note: could not install libosmesa6; video export will say how to enable rendering"; \
 	else echo "note: install libosmesa6 (or use MUJOCO_GL=egl) to render videos"; fi
 
-test: install ## install, then run the whole test suite (< 10 min on 2 cores)
+test: install ## install, lint (ruff), then run the whole test suite (< 10 min on 2 cores)
+	$(VENV)/bin/ruff check .
+	$(VENV)/bin/ruff format --check .
 	$(PY) -m pytest -q -m "not slow"
 
 test-slow: install ## the slow learning checks (minutes each)

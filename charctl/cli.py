@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import sys
 from pathlib import Path
-from typing import List, Optional
 
 import typer
 
@@ -40,7 +39,9 @@ def data_list() -> None:
 
 
 @data_app.command("show")
-def data_show(clip: str = typer.Argument(..., help="clip name (see `charctl data list`), file path, optional ':mirror'")) -> None:
+def data_show(
+    clip: str = typer.Argument(..., help="clip name (see `charctl data list`), file path, optional ':mirror'"),
+) -> None:
     """Facts about one clip, with root travel, mean speed and COM height range."""
     from charctl.commands.data import show_clip
 
@@ -51,8 +52,8 @@ def data_show(clip: str = typer.Argument(..., help="clip name (see `charctl data
 @app.command()
 def train(
     experiment: str = typer.Argument(..., help=" | ".join(EXPERIMENTS)),
-    overrides: Optional[List[str]] = OverridesArg,
-    resume: Optional[Path] = typer.Option(None, "--resume", help="continue this run directory from its last checkpoint"),
+    overrides: list[str] | None = OverridesArg,
+    resume: Path | None = typer.Option(None, "--resume", help="continue this run directory from its last checkpoint"),
     multirun: bool = typer.Option(False, "-m", "--multirun", help="sweep: a=1,2 b=x,y runs every combination in turn"),
 ) -> None:
     """Train an experiment: `charctl train EXPERIMENT scale=smoke ppo.lr=1e-4`."""
@@ -113,7 +114,7 @@ def play(target: str = typer.Argument(..., help="run directory, or an experiment
 @app.command("config")
 def show_config(
     experiment: str = typer.Argument(..., help="experiment name"),
-    overrides: Optional[List[str]] = OverridesArg,
+    overrides: list[str] | None = OverridesArg,
 ) -> None:
     """Print the resolved, validated config of an experiment."""
     from charctl.commands.train import print_config

@@ -67,7 +67,6 @@ def compose_config(experiment: str, overrides: list[str] | None = None, schema: 
     """
     from hydra import compose, initialize_config_dir
     from hydra.errors import HydraException
-    from omegaconf import OmegaConf
     from omegaconf.errors import OmegaConfBaseException
 
     check_experiment(experiment)
@@ -83,7 +82,9 @@ def compose_config(experiment: str, overrides: list[str] | None = None, schema: 
     except HydraException as exc:
         raise CharctlError(_explain_hydra_error(exc, experiment, schema)) from None
     except (OmegaConfBaseException, ValueError, KeyError, IndexError, TypeError) as exc:  # e.g. `a_list.key=1`
-        raise CharctlError(f"bad override for {experiment} ({_first_line(exc)}); overrides: {' '.join(overrides)}") from None
+        raise CharctlError(
+            f"bad override for {experiment} ({_first_line(exc)}); overrides: {' '.join(overrides)}"
+        ) from None
     if schema is not None:
         cfg = validate(cfg, schema, experiment)
         problem = check_device_available(str(cfg.get("device", "auto")))
@@ -156,34 +157,156 @@ _NON_NEGATIVE = {"ge": 0}
 _POSITIVE = {"gt": 0}
 _FRACTION = {"ge": 0, "le": 1}
 RANGE_RULES: dict[str, dict] = {
-    **dict.fromkeys([
-        "num_envs", "rollout_steps", "total_samples", "steps", "batch_size", "minibatch_size", "epochs",
-        "checkpoint_every", "log_every", "eval_every", "torch_threads", "population", "generations", "trials",
-        "workers", "steps_per_iter", "replay_size", "substeps", "starts", "search_interval", "future_samples",
-        "future_spacing", "past_spacing", "history", "kernel", "pool", "fc_hidden", "ar_stride", "speed_frames",
-        "nn_pca_dims", "max_steps", "heading_window", "demo_oversample", "tournament", "periodic_iterations",
-        "periodic_scan", "loop_cycles_after", "init_retries",
-    ], _COUNT),
-    **dict.fromkeys([
-        "seed", "ramp_frames", "past_samples", "exclude_window", "end_buffer", "loop_cycles_before",
-        "loop_blend_frames", "max_delay", "min_phase_frames", "inertia_pose_frame", "value_clip", "entropy_coef",
-        "weight_decay", "logit_reg", "class_lr", "grad_clip", "momentum", "w_style", "w_class", "w_goal", "w_gp",
-        "w_class_loss", "w_stand", "w_mimic", "w_linear", "w_angular", "k_disp", "k_rot", "k_ee", "k_vel",
-        "force_reg", "torque_reg", "torque_limit", "correction_halflife", "heading_smoothing", "settle",
-        "window_cache_mb", "value_coef", "fall_tolerance", "crouch_drop", "crouch_ramp_s", "min_com_speed",
-        "loop_min_seconds", "bvh_scale", "nn_com_weight", "init_noise", "early_margin", "late_margin",
-    ], _NON_NEGATIVE),
-    **dict.fromkeys([
-        "lr", "physics_hz", "control_hz", "episode_seconds", "fps", "frame_unit_hz", "video_fps", "seconds",
-        "mass", "friction", "max_grad_norm", "action_std", "action_scale", "halflife", "speed", "laps", "h",
-        "energy_scale", "omega_floor", "circle_radius", "square_side", "star_outer", "star_inner", "horizon_s",
-        "max_com_step", "impulse_duration", "observe", "kp", "kd", "max_height", "clip", "max_stance_s",
-        "max_flight_s", "goal_sharpness", "sustained_force", "length",
-    ], _POSITIVE),
-    **dict.fromkeys([
-        "replay_fraction", "switch_prob", "cxpb", "mutpb", "indpb", "survive_rate", "early_min_swing",
-        "min_height_ratio",
-    ], _FRACTION),
+    **dict.fromkeys(
+        [
+            "num_envs",
+            "rollout_steps",
+            "total_samples",
+            "steps",
+            "batch_size",
+            "minibatch_size",
+            "epochs",
+            "checkpoint_every",
+            "log_every",
+            "eval_every",
+            "torch_threads",
+            "population",
+            "generations",
+            "trials",
+            "workers",
+            "steps_per_iter",
+            "replay_size",
+            "substeps",
+            "starts",
+            "search_interval",
+            "future_samples",
+            "future_spacing",
+            "past_spacing",
+            "history",
+            "kernel",
+            "pool",
+            "fc_hidden",
+            "ar_stride",
+            "speed_frames",
+            "nn_pca_dims",
+            "max_steps",
+            "heading_window",
+            "demo_oversample",
+            "tournament",
+            "periodic_iterations",
+            "periodic_scan",
+            "loop_cycles_after",
+            "init_retries",
+        ],
+        _COUNT,
+    ),
+    **dict.fromkeys(
+        [
+            "seed",
+            "ramp_frames",
+            "past_samples",
+            "exclude_window",
+            "end_buffer",
+            "loop_cycles_before",
+            "loop_blend_frames",
+            "max_delay",
+            "min_phase_frames",
+            "inertia_pose_frame",
+            "value_clip",
+            "entropy_coef",
+            "weight_decay",
+            "logit_reg",
+            "class_lr",
+            "grad_clip",
+            "momentum",
+            "w_style",
+            "w_class",
+            "w_goal",
+            "w_gp",
+            "w_class_loss",
+            "w_stand",
+            "w_mimic",
+            "w_linear",
+            "w_angular",
+            "k_disp",
+            "k_rot",
+            "k_ee",
+            "k_vel",
+            "force_reg",
+            "torque_reg",
+            "torque_limit",
+            "correction_halflife",
+            "heading_smoothing",
+            "settle",
+            "window_cache_mb",
+            "value_coef",
+            "fall_tolerance",
+            "crouch_drop",
+            "crouch_ramp_s",
+            "min_com_speed",
+            "loop_min_seconds",
+            "bvh_scale",
+            "nn_com_weight",
+            "init_noise",
+            "early_margin",
+            "late_margin",
+        ],
+        _NON_NEGATIVE,
+    ),
+    **dict.fromkeys(
+        [
+            "lr",
+            "physics_hz",
+            "control_hz",
+            "episode_seconds",
+            "fps",
+            "frame_unit_hz",
+            "video_fps",
+            "seconds",
+            "mass",
+            "friction",
+            "max_grad_norm",
+            "action_std",
+            "action_scale",
+            "halflife",
+            "speed",
+            "laps",
+            "h",
+            "energy_scale",
+            "omega_floor",
+            "circle_radius",
+            "square_side",
+            "star_outer",
+            "star_inner",
+            "horizon_s",
+            "max_com_step",
+            "impulse_duration",
+            "observe",
+            "kp",
+            "kd",
+            "max_height",
+            "clip",
+            "max_stance_s",
+            "max_flight_s",
+            "goal_sharpness",
+            "sustained_force",
+            "length",
+        ],
+        _POSITIVE,
+    ),
+    **dict.fromkeys(
+        [
+            "replay_fraction",
+            "switch_prob",
+            "cxpb",
+            "mutpb",
+            "indpb",
+            "survive_rate",
+            "early_min_swing",
+            "min_height_ratio",
+        ],
+        _FRACTION,
+    ),
     "gamma": {"ge": 0, "lt": 1},
     "lam": {"ge": 0, "le": 1},
     "discount": {"gt": 0, "le": 1},
@@ -263,7 +386,9 @@ def check_device_name(device: Any, schema: type | None = None, experiment: str =
         return f"device must be auto, cpu, cuda or cuda:N, got {device!r}"
     devices = getattr(schema, "DEVICES", ("cpu", "cuda"))
     if str(device).startswith("cuda") and "cuda" not in devices:
-        return f"{experiment or 'this experiment'} runs on the CPU only (no GPU code path); use device=cpu or device=auto"
+        return (
+            f"{experiment or 'this experiment'} runs on the CPU only (no GPU code path); use device=cpu or device=auto"
+        )
     return None
 
 
@@ -382,6 +507,18 @@ def _field_type(f: dataclasses.Field) -> Any:
 
 
 __all__ = [
-    "BaseConfig", "compose_config", "validate", "expand_multirun", "experiment_choices", "scale_choices",
-    "check_experiment", "conf_dir", "to_yaml", "field", "dataclass", "check_ranges", "resolve_device", "RANGE_RULES",
+    "BaseConfig",
+    "compose_config",
+    "validate",
+    "expand_multirun",
+    "experiment_choices",
+    "scale_choices",
+    "check_experiment",
+    "conf_dir",
+    "to_yaml",
+    "field",
+    "dataclass",
+    "check_ranges",
+    "resolve_device",
+    "RANGE_RULES",
 ]

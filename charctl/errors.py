@@ -1,10 +1,10 @@
 """The exception types the CLI turns into one line on stderr and an exit status (never a traceback).
 
-    CharctlError   bad input, bad config, wrong checkpoint, an OS error on a named path  -> exit 2
-    Diverged       training produced a non-finite loss or parameter (the last finite      -> exit 3
-                   checkpoint is kept)
-    Interrupted    Ctrl-C (SIGINT) or SIGTERM stopped a run after its checkpoint was       -> exit 130 / 143
-                   written ("interrupted at ...; continue with --resume RUN")
+CharctlError   bad input, bad config, wrong checkpoint, an OS error on a named path  -> exit 2
+Diverged       training produced a non-finite loss or parameter (the last finite      -> exit 3
+               checkpoint is kept)
+Interrupted    Ctrl-C (SIGINT) or SIGTERM stopped a run after its checkpoint was       -> exit 130 / 143
+               written ("interrupted at ...; continue with --resume RUN")
 """
 
 from __future__ import annotations

@@ -35,9 +35,15 @@ class TrainingProgress:
         self.progress = None
         if self.interactive:
             self.progress = Progress(
-                TextColumn("[bold]{task.description}"), BarColumn(), MofNCompleteColumn(),
-                TextColumn("{task.fields[rate]}"), TimeElapsedColumn(), TextColumn("ETA"), TimeRemainingColumn(),
-                TextColumn("{task.fields[stats]}"), transient=False,
+                TextColumn("[bold]{task.description}"),
+                BarColumn(),
+                MofNCompleteColumn(),
+                TextColumn("{task.fields[rate]}"),
+                TimeElapsedColumn(),
+                TextColumn("ETA"),
+                TimeRemainingColumn(),
+                TextColumn("{task.fields[stats]}"),
+                transient=False,
             )
             self.task = self.progress.add_task(description, total=total, rate="", stats="")
 
@@ -76,4 +82,9 @@ class TrainingProgress:
         if force or now - self._last_plain >= self.plain_every:
             self._last_plain = now
             pct = 100.0 * self.done / max(self.total, 1e-9)
-            print(f"{self.description}: {self.done:,.0f}/{self.total:,.0f} {self.unit} " f"({pct:.0f}%), {self.rate:,.0f} {self.unit}/s  {getattr(self, '_stats', '')}", file=sys.stderr, flush=True)
+            print(
+                f"{self.description}: {self.done:,.0f}/{self.total:,.0f} {self.unit} "
+                f"({pct:.0f}%), {self.rate:,.0f} {self.unit}/s  {getattr(self, '_stats', '')}",
+                file=sys.stderr,
+                flush=True,
+            )

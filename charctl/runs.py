@@ -239,9 +239,15 @@ def open_run(run_dir: str | Path, schema: type | None = None, overrides: list[st
 def latest_run(output_root: str | Path, experiment: str, require_checkpoint: bool = True) -> Path:
     """Most recent run directory of `experiment` (by name = timestamp)."""
     root = Path(output_root) / experiment
-    runs = sorted(p for p in root.glob("*") if (p / "config.yaml").is_file() and (not require_checkpoint or (p / "checkpoints" / "last.pt").is_file()))
+    runs = sorted(
+        p
+        for p in root.glob("*")
+        if (p / "config.yaml").is_file() and (not require_checkpoint or (p / "checkpoints" / "last.pt").is_file())
+    )
     if not runs:
-        raise CharctlError(f"no {experiment} run with a checkpoint in {root}/ — train one first: charctl train {experiment}")
+        raise CharctlError(
+            f"no {experiment} run with a checkpoint in {root}/ — train one first: charctl train {experiment}"
+        )
     return runs[-1]
 
 
@@ -260,8 +266,14 @@ def save_checkpoint(
 
     global _checkpoints_written
     path = Path(path)
-    payload = {"format": CHECKPOINT_FORMAT, "experiment": experiment, "signature": signature or {},
-               "saved_at": time.time(), "tb_step": tb_step, "state": state}
+    payload = {
+        "format": CHECKPOINT_FORMAT,
+        "experiment": experiment,
+        "signature": signature or {},
+        "saved_at": time.time(),
+        "tb_step": tb_step,
+        "state": state,
+    }
     tmp = path.with_suffix(path.suffix + f".tmp{os.getpid()}")
     try:
         with signals_held():
@@ -515,12 +527,18 @@ class StopFlag:
             self.requested = True
             self.signum = int(signum)
             _received.append(int(signum))
-            print("\nstopping: finishing this iteration and writing a checkpoint (press Ctrl-C twice more to quit "
-                  "without it)", file=sys.stderr, flush=True)
+            print(
+                "\nstopping: finishing this iteration and writing a checkpoint (press Ctrl-C twice more to quit "
+                "without it)",
+                file=sys.stderr,
+                flush=True,
+            )
             return
         if self.count >= self.give_up_after:
-            raise Interrupted("interrupted before the current iteration finished; the last checkpoint on disk is kept",
-                              signum=self.signum)
+            raise Interrupted(
+                "interrupted before the current iteration finished; the last checkpoint on disk is kept",
+                signum=self.signum,
+            )
         print("\nstill stopping (press Ctrl-C once more to quit without the checkpoint)", file=sys.stderr, flush=True)
 
     def __enter__(self) -> StopFlag:

@@ -66,7 +66,10 @@ def main() -> None:
         rew = discriminator_rewards(agent, ro)
         ro.storage.rewards = total_reward(agent, rew, ro.r_goal) + ro.bootstrap
         with torch.no_grad():
-            lv = agent.model.value(torch.as_tensor(env.state, dtype=torch.float32), torch.as_tensor(env.command_blend(), dtype=torch.float32))
+            lv = agent.model.value(
+                torch.as_tensor(env.state, dtype=torch.float32),
+                torch.as_tensor(env.command_blend(), dtype=torch.float32),
+            )
         ro.storage.finish(lv, cfg.ppo.gamma, cfg.ppo.lam)
         t2 = time.perf_counter()
         agent.ppo.update(ro.storage)
@@ -77,9 +80,15 @@ def main() -> None:
             phases[k] += v
     full = T * a.iters * env.N / (time.perf_counter() - t_all)
     total = sum(phases.values())
-    print(f"cgail bench: {env.N} envs, physics {cfg.env.physics_hz:.0f} Hz / control " f"{cfg.env.control_hz:.0f} Hz, policy {list(cfg.ppo.hidden)}, disc {list(cfg.disc.hidden)}")
+    print(
+        f"cgail bench: {env.N} envs, physics {cfg.env.physics_hz:.0f} Hz / control "
+        f"{cfg.env.control_hz:.0f} Hz, policy {list(cfg.ppo.hidden)}, disc {list(cfg.disc.hidden)}"
+    )
     print(f"  raw batched physics     {raw:10,.0f} samples/s (control steps of all envs)")
-    print(f"  rollout (+obs, policy, disc reward) {rollout:10,.0f} samples/s " f"= {100 * rollout / raw:.0f} % of raw physics (target >= 70 %)")
+    print(
+        f"  rollout (+obs, policy, disc reward) {rollout:10,.0f} samples/s "
+        f"= {100 * rollout / raw:.0f} % of raw physics (target >= 70 %)"
+    )
     print(f"  whole training loop     {full:10,.0f} samples/s")
     print("  time per phase: " + ", ".join(f"{k} {100 * v / total:.0f} %" for k, v in phases.items()))
 

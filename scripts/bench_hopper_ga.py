@@ -31,8 +31,11 @@ def main() -> None:
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--seed", type=int, default=0)
     args = ap.parse_args()
-    print(f"hopper-ga GA {args.population} x {args.generations}, speed " f"{args.speed} m/s, beta {args.beta}, workers {args.workers}")
-    print(f"{'runtime':>8} {'wall s':>8} {'setup s':>8} {'cpu s':>8} " f"{'evals':>7} {'eval s':>8} {'best eval':>12}")
+    print(
+        f"hopper-ga GA {args.population} x {args.generations}, speed "
+        f"{args.speed} m/s, beta {args.beta}, workers {args.workers}"
+    )
+    print(f"{'runtime':>8} {'wall s':>8} {'setup s':>8} {'cpu s':>8} {'evals':>7} {'eval s':>8} {'best eval':>12}")
     for kind in args.runtimes.split(","):
         cfg = OmegaConf.structured(Config)
         cfg.speed, cfg.beta = args.speed, args.beta
@@ -44,7 +47,11 @@ def main() -> None:
             setup = time.perf_counter() - t0
             st = evolve(cfg.ga, args.seed, s.low, s.high, ev)
         wall, cpu = time.perf_counter() - t0, time.process_time() - c0
-        print(f"{kind:>8} {wall:>8.1f} {setup:>8.1f} {cpu:>8.1f} {st.evaluations:>7d} " f"{st.eval_seconds:>8.1f} {st.best_fitness:>12.8f}", flush=True)
+        print(
+            f"{kind:>8} {wall:>8.1f} {setup:>8.1f} {cpu:>8.1f} {st.evaluations:>7d} "
+            f"{st.eval_seconds:>8.1f} {st.best_fitness:>12.8f}",
+            flush=True,
+        )
 
 
 if __name__ == "__main__":

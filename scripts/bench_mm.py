@@ -1,19 +1,19 @@
 #!/usr/bin/env python
 """motion-matching benchmark: query latency of the indices vs brute force, and the real-time factor.
 
-  * real database (default config: 120 Hz, 14 clips) with the queries the runtime really makes
-    while following circle/square/star (recorded, then replayed against each index);
-  * synthetic 50,000-frame databases of the same feature width:
-      takes        the real database repeated as further "takes" (in frame order, so consecutive
-                   rows stay close, as in any mocap database), each take moved by a slowly
-                   varying random offset (0.15 x the per-column spread) plus white noise (0.02 x)
-      iid          i.i.d. Gaussian rows with the real per-column spread: no structure at all,
-                   the worst case for any tree or box pruning
-    queried with the recorded queries and a random current row (exclusion window k = 20 rows);
-  * real-time factor: frames generated per wall-clock second (search + pose inertialization +
-    root reconstruction) divided by the database rate.
+* real database (default config: 120 Hz, 14 clips) with the queries the runtime really makes
+  while following circle/square/star (recorded, then replayed against each index);
+* synthetic 50,000-frame databases of the same feature width:
+    takes        the real database repeated as further "takes" (in frame order, so consecutive
+                 rows stay close, as in any mocap database), each take moved by a slowly
+                 varying random offset (0.15 x the per-column spread) plus white noise (0.02 x)
+    iid          i.i.d. Gaussian rows with the real per-column spread: no structure at all,
+                 the worst case for any tree or box pruning
+  queried with the recorded queries and a random current row (exclusion window k = 20 rows);
+* real-time factor: frames generated per wall-clock second (search + pose inertialization +
+  root reconstruction) divided by the database rate.
 
-    python scripts/bench_mm.py [--json FILE] [--repeat N] [--synthetic N] [overrides ...]
+  python scripts/bench_mm.py [--json FILE] [--repeat N] [--synthetic N] [overrides ...]
 """
 
 from __future__ import annotations
@@ -117,8 +117,12 @@ def main() -> None:
             built = time.perf_counter() - tic
             wall, cpu, ans = time_queries(index, queries, args.repeat)
             ref = ans if ref is None else ref
-            row[kind] = {"us_per_query": wall * 1e6, "cpu_us_per_query": cpu * 1e6, "build_s": built,
-                         "same_as_brute": ans == ref}
+            row[kind] = {
+                "us_per_query": wall * 1e6,
+                "cpu_us_per_query": cpu * 1e6,
+                "build_s": built,
+                "same_as_brute": ans == ref,
+            }
         results["latency_us"][label] = row
 
     measure(f"real ({n} frames)", lambda k: make_index(k, db), calls)
@@ -139,26 +143,36 @@ def main() -> None:
             r = run_path(db, index, p, cfg, with_pose=True)
             wall += time.perf_counter() - tic
             frames += r.num_frames
-        results["runtime"][kind] = {"frames": frames, "seconds": wall, "frames_per_s": frames / wall,
-                                    "realtime_factor": frames / wall / db.fps}
+        results["runtime"][kind] = {
+            "frames": frames,
+            "seconds": wall,
+            "frames_per_s": frames / wall,
+            "realtime_factor": frames / wall / db.fps,
+        }
 
-    print(f"\nquery latency (µs per query, best of {args.repeat}; {len(calls)} recorded runtime queries, "
-          f"{len(syn_calls)} on the synthetic sets):")
+    print(
+        f"\nquery latency (µs per query, best of {args.repeat}; {len(calls)} recorded runtime queries, "
+        f"{len(syn_calls)} on the synthetic sets):"
+    )
     print(f"{'database':<24}" + "".join(f"{k + ' wall/cpu':>20}" for k in KINDS) + "   same answers as brute")
     for label, row in results["latency_us"].items():
         same = all(v["same_as_brute"] for v in row.values())
         cells = "".join(f"{row[k]['us_per_query']:>11.1f} /{row[k]['cpu_us_per_query']:>7.1f}" for k in KINDS)
         print(f"{label:<24}{cells}   {same}")
     for kind, rt in results["runtime"].items():
-        print(f"runtime ({kind}): {rt['frames']} frames in {rt['seconds']:.2f} s = {rt['frames_per_s']:.0f} frames/s "
-              f"= {rt['realtime_factor']:.1f}x real time at {db.fps:.0f} Hz (pose inertialization on)")
+        print(
+            f"runtime ({kind}): {rt['frames']} frames in {rt['seconds']:.2f} s = {rt['frames_per_s']:.0f} frames/s "
+            f"= {rt['realtime_factor']:.1f}x real time at {db.fps:.0f} Hz (pose inertialization on)"
+        )
     best = min(results["latency_us"][f"takes ({args.synthetic} frames)"].items(), key=lambda kv: kv[1]["us_per_query"])
     load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
     results["machine"] = {"cpus": os.cpu_count(), "load_1min": load}
-    print(f"target (< 100 µs per query at {args.synthetic} frames, 'takes'): best index {best[0]} "
-          f"{best[1]['us_per_query']:.1f} µs wall, {best[1]['cpu_us_per_query']:.1f} µs CPU -> "
-          f"{'met' if best[1]['us_per_query'] < 100 else 'not met'} in wall time "
-          f"(machine: {os.cpu_count()} CPUs, load average {load:.1f})")
+    print(
+        f"target (< 100 µs per query at {args.synthetic} frames, 'takes'): best index {best[0]} "
+        f"{best[1]['us_per_query']:.1f} µs wall, {best[1]['cpu_us_per_query']:.1f} µs CPU -> "
+        f"{'met' if best[1]['us_per_query'] < 100 else 'not met'} in wall time "
+        f"(machine: {os.cpu_count()} CPUs, load average {load:.1f})"
+    )
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)
         args.json.write_text(json.dumps(results, indent=2))

@@ -79,11 +79,14 @@ def main() -> None:
     raw = raw_mj_step(a.physics_hz, a.seconds)
     ctrl, unstable, _, sub = batched(a.envs, a.physics_hz, a.control_hz, a.seconds)
     print(f"raw mj_step (1 MjData, 1 thread):        {raw:12,.0f} physics steps/s")
-    print(f"BatchedHumanoid ({a.envs} envs, {a.physics_hz:.0f}/{a.control_hz:.0f} " f"Hz): {ctrl:12,.0f} control steps/s = {ctrl * sub:,.0f} physics steps/s")
-    print("ratio batched/raw (physics steps):        " f"{ctrl * sub / raw:12.2f}x   (unstable resets: {unstable})")
+    print(
+        f"BatchedHumanoid ({a.envs} envs, {a.physics_hz:.0f}/{a.control_hz:.0f} "
+        f"Hz): {ctrl:12,.0f} control steps/s = {ctrl * sub:,.0f} physics steps/s"
+    )
+    print(f"ratio batched/raw (physics steps):        {ctrl * sub / raw:12.2f}x   (unstable resets: {unstable})")
     if a.sweep:
         print("\nphysics-rate sweep (64 envs, PD tracking of walk with 0.1 rad target noise, 2 s episodes):")
-        print(f"{'physics Hz':>10} {'substeps':>8} {'ctrl steps/s':>13} " f"{'blow-ups':>8} {'mean |q - q_ref| rad':>21}")
+        print(f"{'physics Hz':>10} {'substeps':>8} {'ctrl steps/s':>13} {'blow-ups':>8} {'mean |q - q_ref| rad':>21}")
         for hz in (120.0, 240.0, 300.0, 480.0, 600.0, 1200.0):
             rate, bad, err, sub = batched(64, hz, a.control_hz, a.seconds, noise=0.1)
             print(f"{hz:10.0f} {sub:8d} {rate:13,.0f} {bad:8d} {err:21.4f}")

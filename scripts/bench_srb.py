@@ -71,7 +71,9 @@ def bench_qp(cfg, n: int) -> dict:
         out[f"solve_us[{name}]"] = 1e6 * per
         out[f"solves_per_s[{name}]"] = 1.0 / per
     infos = [daqp.solve(h[i], f[i], np.zeros((0, Q.N_VARS)), ub[i], lb[i])[3] for i in range(n)]
-    out["daqp_internal_us"] = 1e6 * float(np.mean([i["solve_time"] + i["setup_time"] for i in infos]))  # C setup + solve
+    out["daqp_internal_us"] = 1e6 * float(
+        np.mean([i["solve_time"] + i["setup_time"] for i in infos])
+    )  # C setup + solve
     out["daqp_iterations_mean"] = float(np.mean([i["iterations"] for i in infos]))
     # the alternative: one block-diagonal QP over all envs (daqp is dense, so cost grows with n^2..3)
     big_h = scipy.linalg.block_diag(*h)
@@ -106,11 +108,15 @@ def bench_rollout_and_training(cfg, envs: int, steps: int, iterations: int) -> d
         t_upd += t2 - t1
     samples = envs * steps * iterations
     zero = timed(lambda: env.step(np.zeros((envs, 10))), 20)
-    return {"envs": envs, "rollout_steps": steps, "iterations": iterations,
-            "env_only_samples_per_s": envs / zero,
-            "rollout_samples_per_s": samples / t_roll,
-            "training_samples_per_s": samples / (t_roll + t_upd),
-            "ppo_update_s_per_1024": t_upd / iterations * 1024 / (envs * steps)}
+    return {
+        "envs": envs,
+        "rollout_steps": steps,
+        "iterations": iterations,
+        "env_only_samples_per_s": envs / zero,
+        "rollout_samples_per_s": samples / t_roll,
+        "training_samples_per_s": samples / (t_roll + t_upd),
+        "ppo_update_s_per_1024": t_upd / iterations * 1024 / (envs * steps),
+    }
 
 
 def main() -> None:
@@ -128,18 +134,26 @@ def main() -> None:
     qp = bench_qp(cfg, args.envs)
     run = bench_rollout_and_training(cfg, args.envs, args.steps, args.iterations)
     per_core_paper = PAPER_SAMPLES_PER_S / PAPER_CORES
-    result = {"qp": qp, "rl": run, "paper_samples_per_s": PAPER_SAMPLES_PER_S, "paper_samples_per_s_per_core": per_core_paper,
-              "ratio_training_per_core_vs_paper": run["training_samples_per_s"] / per_core_paper,
-              "ratio_training_vs_paper_machine": run["training_samples_per_s"] / PAPER_SAMPLES_PER_S}
+    result = {
+        "qp": qp,
+        "rl": run,
+        "paper_samples_per_s": PAPER_SAMPLES_PER_S,
+        "paper_samples_per_s_per_core": per_core_paper,
+        "ratio_training_per_core_vs_paper": run["training_samples_per_s"] / per_core_paper,
+        "ratio_training_vs_paper_machine": run["training_samples_per_s"] / PAPER_SAMPLES_PER_S,
+    }
     print(f"QP ({args.envs} envs, 19 variables each, recorded walking instances):")
     for k, v in qp.items():
         if k != "envs":
             print(f"  {k:38s} {v:12,.1f}")
-    print(f"rollout / training ({args.envs} envs x {args.steps} " f"steps, {args.iterations} PPO iterations, 1 core):")
+    print(f"rollout / training ({args.envs} envs x {args.steps} steps, {args.iterations} PPO iterations, 1 core):")
     for k, v in run.items():
         print(f"  {k:38s} {v:12,.2f}")
-    print(f"paper: {PAPER_SAMPLES_PER_S:,.0f} samples/s on " f"{PAPER_CORES} cores = {per_core_paper:,.0f} per core")
-    print(f"ours / paper per core: {result['ratio_training_per_core_vs_paper']:.3f}  " f"(ours / paper machine: {result['ratio_training_vs_paper_machine']:.4f})")
+    print(f"paper: {PAPER_SAMPLES_PER_S:,.0f} samples/s on {PAPER_CORES} cores = {per_core_paper:,.0f} per core")
+    print(
+        f"ours / paper per core: {result['ratio_training_per_core_vs_paper']:.3f}  "
+        f"(ours / paper machine: {result['ratio_training_vs_paper_machine']:.4f})"
+    )
     if args.json:
         with open(args.json, "w") as fh:
             json.dump(result, fh, indent=2)

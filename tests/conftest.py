@@ -31,7 +31,9 @@ def cli_env(**extra: str) -> dict[str, str]:
     return env
 
 
-def run_charctl(*args: str, cwd: Path | None = None, env: dict[str, str] | None = None, timeout: float = 120) -> subprocess.CompletedProcess:
+def run_charctl(
+    *args: str, cwd: Path | None = None, env: dict[str, str] | None = None, timeout: float = 120
+) -> subprocess.CompletedProcess:
     """Run the installed `charctl` console script as a user would (text mode, captured output)."""
     exe = str(CHARCTL) if CHARCTL.exists() else None
     cmd = [exe, *args] if exe else [sys.executable, "-c", "from charctl.cli import main; main()", *args]

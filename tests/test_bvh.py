@@ -136,7 +136,9 @@ def test_generic_reader_hand_fk(tmp_path):
     # frame 1: hips turned +90 deg about y: (2, 0, 0) -> (0, 0, -2); spine offset (0,10,0) unchanged
     np.testing.assert_allclose(pos[1], [[0, 100, 0], [0, 110, 0], [0, 100, -2]], atol=1e-9)
     # spine: Ry(90) then its own Rx(90) -> world rotation Ry(90) Rx(90)
-    expect = R.multiply(R.from_axis_angle(np.array([0.0, 1, 0]), np.pi / 2), R.from_axis_angle(np.array([1.0, 0, 0]), np.pi / 2))
+    expect = R.multiply(
+        R.from_axis_angle(np.array([0.0, 1, 0]), np.pi / 2), R.from_axis_angle(np.array([1.0, 0, 0]), np.pi / 2)
+    )
     assert R.angle_between(rot[1, 1], expect) < 1e-9
     # end sites are kept, keyed by their joint
     np.testing.assert_allclose(motion.end_sites[1], [0, 5, 0])

@@ -118,6 +118,7 @@ def test_features_agree_between_clip_and_simulator():
     assert np.abs(o_sim - o_clip).mean() < 0.05
     # heading invariance: turning the character about +y leaves the features unchanged
     from charctl.motion import rotations as R
+
     turn = R.heading_quat(np.array(1.1))
     q2 = qpos[5:8].copy()
     q2[:, 3:7] = R.xyzw_to_wxyz(R.multiply(np.broadcast_to(turn, (3, 4)), R.wxyz_to_xyzw(q2[:, 3:7])))

@@ -53,7 +53,9 @@ def smoke_runs(tmp_path_factory, smoke_run):
     from charctl.commands.train import train_command
 
     root = tmp_path_factory.mktemp("cgail_eval")
-    cg = Path(shutil.copytree(smoke_run("cgail"), root / "c" / "cgail" / smoke_run("cgail").name))  # test_smoke.py's run
+    cg = Path(
+        shutil.copytree(smoke_run("cgail"), root / "c" / "cgail" / smoke_run("cgail").name)
+    )  # test_smoke.py's run
     (amp,) = train_command("cgail", ["scale=smoke", "cgail.conditional=false", f"output_root={root}/a"])
     return cg, amp, root
 
@@ -63,8 +65,20 @@ def test_every_eval_mode_writes_its_files(smoke_runs):
 
     cg, amp, root = smoke_runs
     out = root / "eval"
-    eval_command([str(cg), str(amp)], {"dtw": True, "confusion": True, "switch": ("walk", "right_kick"), "curves": True,
-                                       "pose_error": False, "push": False, "sweep": False, "episodes": 2, "out": out})
+    eval_command(
+        [str(cg), str(amp)],
+        {
+            "dtw": True,
+            "confusion": True,
+            "switch": ("walk", "right_kick"),
+            "curves": True,
+            "pose_error": False,
+            "push": False,
+            "sweep": False,
+            "episodes": 2,
+            "out": out,
+        },
+    )
     dtw = json.loads((out / "dtw.json").read_text())
     assert set(dtw["table"]) == {"walk", "right_kick"}
     assert {"cGAIL", "AMP", "paper cGAIL", "paper AMP"} <= set(dtw["table"]["walk"])
@@ -75,7 +89,14 @@ def test_every_eval_mode_writes_its_files(smoke_runs):
         assert np.allclose(np.sum(conf[key], axis=1), 1.0, atol=1e-5)  # rows sum to 1
     sw = json.loads((out / "switch_walk_to_right_kick.json").read_text())
     assert set(sw["summary"]) == {"ramp", "no_ramp"} and sw["summary"]["no_ramp"]["ramp_frames"] == 0
-    for f in ("dtw.csv", "confusion.png", "switch_walk_to_right_kick.png", "curves_reward.png", "curves_class_accuracy.png", "report.md"):
+    for f in (
+        "dtw.csv",
+        "confusion.png",
+        "switch_walk_to_right_kick.png",
+        "curves_reward.png",
+        "curves_class_accuracy.png",
+        "report.md",
+    ):
         assert (out / f).is_file() and (out / f).stat().st_size > 0, f
     report = (out / "report.md").read_text()
     assert "Table 6.1" in report and "Fig 6.8" in report

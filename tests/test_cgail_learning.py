@@ -20,7 +20,13 @@ def scalars(tmp_path_factory):
     from charctl.eval.tb import read_scalars
 
     root = tmp_path_factory.mktemp("cgail_learning")
-    overrides = ["scale=small", "use_skills=[walk,right_kick]", "train.total_samples=300000", f"output_root={root}", "seed=1"]
+    overrides = [
+        "scale=small",
+        "use_skills=[walk,right_kick]",
+        "train.total_samples=300000",
+        f"output_root={root}",
+        "seed=1",
+    ]
     (run_dir,) = train_command("cgail", overrides)
     return read_scalars(run_dir / "tb")
 
@@ -28,13 +34,17 @@ def scalars(tmp_path_factory):
 def test_policy_class_accuracy_rises(scalars):
     _, acc = scalars["train/class_acc_policy"]
     n = max(3, len(acc) // 10)
-    assert acc[-n:].mean() > acc[:n].mean() + 0.05, f"policy class accuracy did not rise: {acc[:n].mean():.3f} -> {acc[-n:].mean():.3f}"
+    assert acc[-n:].mean() > acc[:n].mean() + 0.05, (
+        f"policy class accuracy did not rise: {acc[:n].mean():.3f} -> {acc[-n:].mean():.3f}"
+    )
 
 
 def test_episode_length_rises(scalars):
     _, ep = scalars["train/episode_length"]
     n = max(3, len(ep) // 10)
-    assert ep[-n:].mean() > ep[:n].mean() + 3, f"episode length did not rise: {ep[:n].mean():.1f} -> {ep[-n:].mean():.1f}"
+    assert ep[-n:].mean() > ep[:n].mean() + 3, (
+        f"episode length did not rise: {ep[:n].mean():.1f} -> {ep[-n:].mean():.1f}"
+    )
 
 
 def test_style_reward_never_collapses(scalars):

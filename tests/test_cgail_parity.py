@@ -8,8 +8,14 @@ import numpy as np
 import pytest
 import torch
 
-OBS_BLOCKS = {"root_height": slice(0, 1), "root_velocity": slice(1, 4), "root_angular_velocity": slice(4, 7),
-              "joint_rotations": slice(7, 79), "body_velocities": slice(79, 121), "end_effectors": slice(121, 133)}
+OBS_BLOCKS = {
+    "root_height": slice(0, 1),
+    "root_velocity": slice(1, 4),
+    "root_angular_velocity": slice(4, 7),
+    "joint_rotations": slice(7, 79),
+    "body_velocities": slice(79, 121),
+    "end_effectors": slice(121, 133),
+}
 
 
 @pytest.mark.parametrize("clip_name", ["walk", "run", "kick"])
@@ -68,8 +74,8 @@ def _accuracy(disc, data: torch.Tensor, other: torch.Tensor) -> float:
 def test_discriminator_separates_data_from_a_shifted_copy_and_not_from_itself():
     """Walk pairs vs pairs lifted 5 cm (root height + end effectors): separable (accuracy > 0.9 on
     held-out frames). Walk pairs vs walk pairs (two random halves): not (accuracy within 0.5 +- 0.15)."""
-    from charctl.experiments.cgail.skills import DemoPairs, load_skills
     from charctl.experiments.cgail.config import SkillConfig
+    from charctl.experiments.cgail.skills import DemoPairs, load_skills
 
     (skill,) = load_skills([SkillConfig("walk", "walk")], 30.0, oversample=4)
     pairs = torch.from_numpy(DemoPairs([skill]).pairs[0])
@@ -136,7 +142,11 @@ def test_class_reward_forms_hand_values():
 def test_bce_objective_and_regularisers_hand_values():
     """bce reward -log(1 - sigmoid(D)) at D = 0 is log 2; the regularisers are sums of squared weights."""
     from charctl.experiments.cgail.discriminator import (
-        Discriminator, logit_regulariser, style_loss, style_reward, weight_decay_term,
+        Discriminator,
+        logit_regulariser,
+        style_loss,
+        style_reward,
+        weight_decay_term,
     )
 
     assert style_reward(torch.tensor([0.0]), "bce").item() == pytest.approx(np.log(2.0))

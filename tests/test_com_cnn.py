@@ -83,9 +83,13 @@ def test_looping_clips_are_tiled_without_jumps_and_start_at_the_origin_facing_pl
     cfg = compose("data.clips=[walker/turn_right0]", "data.test_clips=[]", "data.mirror=false")
     (seq,), body = load_sequences(cfg)
     raw = load_clip("walker/turn_right0").resample(30.0)
-    assert seq.cycles == math.ceil(6.0 * 30 / (raw.num_frames - 1)) and seq.num_frames == seq.cycles * (raw.num_frames - 1) + 1
+    assert (
+        seq.cycles == math.ceil(6.0 * 30 / (raw.num_frames - 1))
+        and seq.num_frames == seq.cycles * (raw.num_frames - 1) + 1
+    )
     np.testing.assert_allclose(seq.root_pos[0, [0, 2]], 0.0, atol=1e-9)
     assert heading_yaw(seq.root_rot[0], body.forward) == pytest.approx(0.0, abs=1e-9)
+
     def step(p):
         return np.linalg.norm(np.diff(p[:, [0, 2]], axis=0), axis=1).max()
 
@@ -98,7 +102,9 @@ def test_looping_clips_are_tiled_without_jumps_and_start_at_the_origin_facing_pl
     assert joint_step(seq.joint_rot) < 1.3 * joint_step(raw.local_rot[:, 1:])
     total_turn = np.unwrap(heading_yaw(seq.root_rot, body.forward))
     one_cycle = np.unwrap(heading_yaw(raw.local_rot[:, 0], np.array([1.0, 0.0, 0.0])))
-    assert total_turn[-1] == pytest.approx(seq.cycles * (one_cycle[-1] - one_cycle[0]), abs=0.05)  # the turn accumulates
+    assert total_turn[-1] == pytest.approx(
+        seq.cycles * (one_cycle[-1] - one_cycle[0]), abs=0.05
+    )  # the turn accumulates
 
 
 # ---------------------------------------------------------------------------- the paper's COM
@@ -176,9 +182,19 @@ def test_bvh_com_puts_each_part_mass_halfway_to_its_child_hand_computed(tmp_path
     com = body.com(trans[:, 0], rot[:, 0], rot[:, 1:])
     # Hips 10 at (1, .5, 0) (halfway to Spine, its first child); Spine 20 at (1, 1.25, 0);
     # Head 5 at (1, 1.6, 0) (halfway to the end site); LeftUpLeg 5 at joint + half its end site.
-    upright = (10 * np.array([1, 0.5, 0]) + 20 * np.array([1, 1.25, 0]) + 5 * np.array([1, 1.6, 0]) + 5 * np.array([1.1, -0.3, 0])) / 40
+    upright = (
+        10 * np.array([1, 0.5, 0])
+        + 20 * np.array([1, 1.25, 0])
+        + 5 * np.array([1, 1.6, 0])
+        + 5 * np.array([1.1, -0.3, 0])
+    ) / 40
     # frame 2: Hips turned +90 deg about y: the leg offset (0.1, -0.1, 0) becomes (0, -0.1, -0.1)
-    turned = (10 * np.array([1, 0.5, 0]) + 20 * np.array([1, 1.25, 0]) + 5 * np.array([1, 1.6, 0]) + 5 * np.array([1.0, -0.3, -0.1])) / 40
+    turned = (
+        10 * np.array([1, 0.5, 0])
+        + 20 * np.array([1, 1.25, 0])
+        + 5 * np.array([1, 1.6, 0])
+        + 5 * np.array([1.0, -0.3, -0.1])
+    ) / 40
     np.testing.assert_allclose(com, [upright, turned], atol=1e-6)
     assert body.pose_dim == 6 + 3 * 3
 
@@ -220,9 +236,18 @@ def test_tiny_training_run_lowers_the_loss_and_resumes(tmp_path):
     from charctl.experiments.com_cnn.train import BatchSource, normalizer_stats, teacher_forced, train
     from charctl.runs import new_run, open_run
 
-    cfg = compose("scale=smoke", "data.clips=[walk,walker/turn_right1]", "data.test_clips=[walker/turn_right1]",
-                  "data.history=15", "model.kernel=2", "model.channels=[8,16,32]", "train.steps=150",
-                  "train.optimizer=adam", "train.lr=0.003", f"output_root={tmp_path}")
+    cfg = compose(
+        "scale=smoke",
+        "data.clips=[walk,walker/turn_right1]",
+        "data.test_clips=[walker/turn_right1]",
+        "data.history=15",
+        "model.kernel=2",
+        "model.channels=[8,16,32]",
+        "train.steps=150",
+        "train.optimizer=adam",
+        "train.lr=0.003",
+        f"output_root={tmp_path}",
+    )
     run = new_run(cfg)
     metrics = train(cfg, run)
     run.close()
@@ -293,9 +318,14 @@ def test_com_path_csv_problems_are_one_line_errors(tmp_path, capsys):
         (tmp_path / name).write_text(text)
         return str(tmp_path / name)
 
-    for text, words in [("a,b,c\n1,2,3\n", "header"), ("x,y\n0,1\n0,1\n", "header"), ("x,y,z\n0,0.9,0\n0,nan,0.1\n", "NaN"),
-                        ("x,y,z\n0,0.9,0\n0,0.9\n", "line 3"), ("x,y,z\n0,0.9,0\n0,abc,0\n", "not a number"),
-                        ("t,x,y,z\n0,0,0.9,0\n0,0,0.9,0.1\n", "increase")]:
+    for text, words in [
+        ("a,b,c\n1,2,3\n", "header"),
+        ("x,y\n0,1\n0,1\n", "header"),
+        ("x,y,z\n0,0.9,0\n0,nan,0.1\n", "NaN"),
+        ("x,y,z\n0,0.9,0\n0,0.9\n", "line 3"),
+        ("x,y,z\n0,0.9,0\n0,abc,0\n", "not a number"),
+        ("t,x,y,z\n0,0,0.9,0\n0,0,0.9,0.1\n", "increase"),
+    ]:
         with pytest.raises(CharctlError) as exc:
             make_com_path(csv("bad.csv", text), start, 1.0, 30.0, None, gen)
         assert_one_line(exc.value, words)
@@ -339,7 +369,12 @@ def test_bvh_folder_dataset_and_generic_bvh_writer_round_trip(tmp_path):
     for name in ("walk", "run"):
         write_bvh(load_clip(name), folder / f"{name}_01.bvh")
     mapping = ",".join(f"{k}:{v}" for k, v in HUMANOID_BODIES.items())
-    cfg = compose(f"data.bvh_dir={folder}", "data.test_clips=[run_01]", f"com.bvh_joints={{{mapping}}}", "data.bvh_forward=[1,0,0]")
+    cfg = compose(
+        f"data.bvh_dir={folder}",
+        "data.test_clips=[run_01]",
+        f"com.bvh_joints={{{mapping}}}",
+        "data.bvh_forward=[1,0,0]",
+    )
     train_w, test_w, body = build_windows(cfg)
     assert body.kind == "bvh" and body.pose_dim == 48 and body.masses.sum() == pytest.approx(62.0)
     assert [s.label for s in train_w.seqs] == ["walk"] and [s.label for s in test_w.seqs] == ["run"]
@@ -373,7 +408,16 @@ def test_smoke_train_eval_export_end_to_end(tmp_path):
     result = json.loads((tmp_path / "eval" / "pose_error.json").read_text())
     tf = result["teacher_forced"]
     assert all(0.0 < r["all"] < 90.0 for r in tf.values())
-    res = run_charctl("export", str(run_dir), "--com-path", "circle:r=1.5,speed=1.0", "--seconds", "1", "--bvh", str(tmp_path / "gen.bvh"))
+    res = run_charctl(
+        "export",
+        str(run_dir),
+        "--com-path",
+        "circle:r=1.5,speed=1.0",
+        "--seconds",
+        "1",
+        "--bvh",
+        str(tmp_path / "gen.bvh"),
+    )
     assert res.returncode == 0, res.stderr[-2000:]
     from charctl.motion.bvh import read_bvh
 

@@ -26,7 +26,6 @@ from charctl.errors import CharctlError
 
 from conftest import REPO, assert_one_line, assert_one_line_error, cli_env, run_charctl
 
-
 # ---------------------------------------------------------------------------- the demo experiment
 DEMO_PACKAGE = '''
 """A throw-away experiment for the CLI tests: a config schema and a train() that checkpoints."""
@@ -115,8 +114,14 @@ def demo_subprocess(demo_root: Path, *args: str) -> subprocess.CompletedProcess:
     """The same, as a separate `python` process (what a user's shell sees)."""
     pythonpath = os.pathsep.join(p for p in [str(demo_root / "pkgs"), os.environ.get("PYTHONPATH", "")] if p)
     env = cli_env(CHARCTL_CONF=str(demo_root / "conf"), PYTHONPATH=pythonpath)
-    return subprocess.run([sys.executable, str(demo_root / "charctl_demo.py"), *args], cwd=demo_root, env=env,
-                          capture_output=True, text=True, timeout=120)
+    return subprocess.run(
+        [sys.executable, str(demo_root / "charctl_demo.py"), *args],
+        cwd=demo_root,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
 
 
 def _ok(res: subprocess.CompletedProcess) -> str:
@@ -135,7 +140,8 @@ def test_help_exits_zero():
 
 def test_cli_import_is_light():
     """`charctl --help` must not pay for torch/mujoco/hydra/pybullet: cli.py imports them lazily."""
-    code = "import sys, charctl.cli; print(sorted(m for m in ('torch','mujoco','hydra','pybullet','omegaconf','scipy') if m in sys.modules))"
+    heavy = "('torch','mujoco','hydra','pybullet','omegaconf','scipy')"
+    code = f"import sys, charctl.cli; print(sorted(m for m in {heavy} if m in sys.modules))"
     res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=cli_env(), timeout=60)
     assert res.returncode == 0, res.stderr
     assert res.stdout.strip() == "[]"
@@ -251,7 +257,7 @@ def test_real_experiment_config_errors():
     assert_one_line_error(run_charctl("config", name, "scale=smoke", "ppo.lrr=1"), "unknown config key", "ppo.lrr")
 
 
-# ---------------------------------------------------------------------------- more of the CLI, in process (main() semantics)
+# ------------------------------------------------------------------ more of the CLI, in process (main() semantics)
 @pytest.mark.parametrize("args", [(), ("data",)], ids=["charctl", "charctl-data"])
 def test_no_arguments_shows_help_without_traceback(charctl_main, args):
     res = charctl_main(*args)
@@ -330,10 +336,14 @@ def _resolved(demo, *overrides):
 def test_config_composition_order(demo):
     cfg = _resolved(demo)  # default scale small: preset small (2) beats experiment yaml (5)
     assert cfg.experiment == "demo" and cfg.scale == "small" and cfg.iterations == 2
-    assert cfg.ppo.lr == 0.001 and cfg.ppo.epochs == 4 and list(cfg.ppo.hidden) == [64, 64]  # yaml, then schema defaults
+    assert (
+        cfg.ppo.lr == 0.001 and cfg.ppo.epochs == 4 and list(cfg.ppo.hidden) == [64, 64]
+    )  # yaml, then schema defaults
     assert cfg.seed == 0 and cfg.output_root == "outputs"
     assert _resolved(demo, "scale=paper").iterations == 100
-    cfg = _resolved(demo, "scale=smoke", "iterations=7", "ppo.lr=1e-2", "seed=3", "ppo.epochs=9")  # command line beats preset
+    cfg = _resolved(
+        demo, "scale=smoke", "iterations=7", "ppo.lr=1e-2", "seed=3", "ppo.epochs=9"
+    )  # command line beats preset
     assert cfg.iterations == 7 and cfg.ppo.lr == 0.01 and cfg.seed == 3 and cfg.scale == "smoke" and cfg.ppo.epochs == 9
 
 
@@ -438,7 +448,11 @@ def torch_mod():
 def _state(torch):
     return {
         "policy": {"w": torch.randn(4, 3, generator=torch.Generator().manual_seed(0)), "b": torch.zeros(3)},
-        "iteration": 12, "lr": 3e-4, "name": "ppo", "history": [1.0, 2.5], "nested": {"ok": True},
+        "iteration": 12,
+        "lr": 3e-4,
+        "name": "ppo",
+        "history": [1.0, 2.5],
+        "nested": {"ok": True},
     }
 
 
@@ -451,8 +465,12 @@ def test_checkpoint_round_trip(tmp_path, torch_mod):
     save_checkpoint(path, "cgail", state, {"obs_dim": 197, "hidden": [1024, 512]})
     assert sorted(p.name for p in path.parent.iterdir()) == ["last.pt"]  # the temp file was renamed away
     back = load_checkpoint(path, "cgail", {"obs_dim": 197, "hidden": [1024, 512]})
-    assert torch.equal(back["policy"]["w"], state["policy"]["w"]) and torch.equal(back["policy"]["b"], state["policy"]["b"])
-    assert {k: back[k] for k in ("iteration", "lr", "name", "history", "nested")} == {k: state[k] for k in ("iteration", "lr", "name", "history", "nested")}
+    assert torch.equal(back["policy"]["w"], state["policy"]["w"]) and torch.equal(
+        back["policy"]["b"], state["policy"]["b"]
+    )
+    assert {k: back[k] for k in ("iteration", "lr", "name", "history", "nested")} == {
+        k: state[k] for k in ("iteration", "lr", "name", "history", "nested")
+    }
     # the file is plain data: torch's safe loader reads it
     payload = torch.load(path, weights_only=True)
     assert payload["experiment"] == "cgail" and payload["signature"]["obs_dim"] == 197

@@ -524,8 +524,16 @@ def test_huge_discriminator_lr_never_writes_non_finite_results(tmp_path):
     discriminator may stay finite and the run finish; either way nothing non-finite is written: a
     divergence is the one-line stop above, a finished run has a finite checkpoint and strict metrics."""
     out = tmp_path / "out"
-    res = run_charctl("train", "cgail", "scale=smoke", "disc.lr=10", "train.total_samples=16384", f"output_root={out}",
-                      cwd=tmp_path, timeout=LIMIT)
+    res = run_charctl(
+        "train",
+        "cgail",
+        "scale=smoke",
+        "disc.lr=10",
+        "train.total_samples=16384",
+        f"output_root={out}",
+        cwd=tmp_path,
+        timeout=LIMIT,
+    )
     assert "Traceback" not in res.stdout + res.stderr
     (run_dir,) = run_dirs(out, "cgail")
     if res.returncode != 0:

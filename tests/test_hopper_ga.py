@@ -17,10 +17,48 @@ from charctl.experiments.hopper_ga import model as M
 from charctl.experiments.hopper_ga.config import Config
 
 # A valid individual at 5 m/s and one at 2 m/s (found by seeded random search with the default bounds).
-GENOME_5 = [0.8511, 11607.1404, 0.7953, 63.9895, 0.8507, -1.1667, 0.9902, 2.2971, -0.3036,
-            9.5988, 5.943, 5.6482, 9.4801, 5.5407, 5.8794, 5.674, 4.4077, 8.7253, 7.0736]
-GENOME_2 = [0.7669, 11951.1486, 0.7727, 88.7954, 0.8559, -1.1657, 1.093, 1.1511, -0.3078,
-            5.9613, 4.9251, 6.6899, 8.5358, 7.3437, 1.1204, 8.3205, 0.5106, 7.0555, 1.8755]
+GENOME_5 = [
+    0.8511,
+    11607.1404,
+    0.7953,
+    63.9895,
+    0.8507,
+    -1.1667,
+    0.9902,
+    2.2971,
+    -0.3036,
+    9.5988,
+    5.943,
+    5.6482,
+    9.4801,
+    5.5407,
+    5.8794,
+    5.674,
+    4.4077,
+    8.7253,
+    7.0736,
+]
+GENOME_2 = [
+    0.7669,
+    11951.1486,
+    0.7727,
+    88.7954,
+    0.8559,
+    -1.1657,
+    1.093,
+    1.1511,
+    -0.3078,
+    5.9613,
+    4.9251,
+    6.6899,
+    8.5358,
+    7.3437,
+    1.1204,
+    8.3205,
+    0.5106,
+    7.0555,
+    1.8755,
+]
 
 
 def settings(**over) -> M.Settings:
@@ -52,8 +90,18 @@ def _vertical_energy(h: float, xdot: float = 0.0, theta0: float = 0.0, steps: in
     """Stance of eq 2 for a 1-leg hopper; returns t, x, y, and the spring-mass energy terms."""
     l, kappa, m, g = 1.0, 9000.0, 60.0, -9.81
     n = steps or int(round(0.6 / h))
-    st = M.integrate_stance(np.array([l]), np.array([kappa]), np.array([theta0]), np.array([m]), np.array([xdot]), h, g,
-                            np.array([-1.5]), n, np.array([0.0]))
+    st = M.integrate_stance(
+        np.array([l]),
+        np.array([kappa]),
+        np.array([theta0]),
+        np.array([m]),
+        np.array([xdot]),
+        h,
+        g,
+        np.array([-1.5]),
+        n,
+        np.array([0.0]),
+    )
     k = int(st.lift[0])
     assert k > 10, "the hopper should stay in stance for a while"
     x, y = st.x[0, : k + 1], st.y[0, : k + 1]
@@ -111,7 +159,7 @@ def test_knee_keeps_hip_foot_distance_and_leg_length():
     shank = np.linalg.norm(legs.foot - legs.knee, axis=-1)
     np.testing.assert_allclose(thigh + shank, l, atol=1e-9)  # |HIP-JOINT| + |JOINT-FOOT| = l
     n = int(c.lift[0])
-    hip_foot = np.linalg.norm(legs.foot[0, : n, 0] - legs.hip[0, : n, 0], axis=-1)
+    hip_foot = np.linalg.norm(legs.foot[0, :n, 0] - legs.hip[0, :n, 0], axis=-1)
     hopper_d = np.hypot(tl.hip[0, :n, 0], tl.hip[0, :n, 1])  # stance: the one-leg hopper's d
     np.testing.assert_allclose(hip_foot, np.minimum(hopper_d, l), atol=1e-9)
     np.testing.assert_allclose(legs.foot[0, :n, 0, 1], 0.0, atol=1e-9)  # the stance foot stays on the ground
@@ -158,10 +206,20 @@ def test_balance_moves_the_com_towards_the_target_on_both_axes():
     upper body so that the COM closes in on the target (the sign conventions of eq 11)."""
     s = settings(speed=2.0)
     K = 150
-    tl = M.Timeline(t=np.arange(K)[None] * s.h, dt=np.full((1, K), s.h), mask=np.ones((1, K), bool), xdot=np.full((1, K), 2.0),
-                    hip=np.tile([0.0, 0.9], (1, K, 1)), theta_c=np.zeros((1, K, 2)), theta_l=np.zeros((1, K, 2)),
-                    target=np.tile([0.10, 0.08], (1, K, 1)), support=np.zeros((1, K), int), lift=np.array([5]),
-                    end=np.array([K - 1]), l=np.array([0.9]))
+    tl = M.Timeline(
+        t=np.arange(K)[None] * s.h,
+        dt=np.full((1, K), s.h),
+        mask=np.ones((1, K), bool),
+        xdot=np.full((1, K), 2.0),
+        hip=np.tile([0.0, 0.9], (1, K, 1)),
+        theta_c=np.zeros((1, K, 2)),
+        theta_l=np.zeros((1, K, 2)),
+        target=np.tile([0.10, 0.08], (1, K, 1)),
+        support=np.zeros((1, K), int),
+        lift=np.array([5]),
+        end=np.array([K - 1]),
+        l=np.array([0.9]),
+    )
     D = s.body.num_dofs
     still = M.run_balance(tl, np.zeros((1, D)), s)
     moving = M.run_balance(tl, np.full((1, D), 5.0), s)

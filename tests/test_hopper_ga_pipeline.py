@@ -34,7 +34,9 @@ def run_ga(cfg, seed: int = 0):
 
 def test_larger_beta_gives_larger_energy_rate():
     """eq 14: the best individual's E_r is pulled towards beta / (1 - beta)."""
-    runs = {b: run_ga(small_cfg(**{"speed": 5.0, "beta": b, "ga.population": 40, "ga.generations": 12})) for b in (0.0, 0.7)}
+    runs = {
+        b: run_ga(small_cfg(**{"speed": 5.0, "beta": b, "ga.population": 40, "ga.generations": 12})) for b in (0.0, 0.7)
+    }
     e0, e7 = runs[0.0].history["E_r"][-1], runs[0.7].history["E_r"][-1]
     assert e7 > e0 + 0.5, (e0, e7)
     assert abs(e7 - 0.7 / 0.3) < abs(e0 - 0.7 / 0.3)
@@ -76,10 +78,27 @@ def test_resume_from_a_checkpoint_continues_the_same_trajectory(tmp_path):
 
 def test_cli_train_with_ray_export_and_report(tmp_path):
     out = tmp_path / "runs"
-    res = run_charctl("train", "hopper-ga", "scale=smoke", "speed=5", "beta=0.5", "runtime.kind=ray", f"output_root={out}", timeout=240)
+    res = run_charctl(
+        "train",
+        "hopper-ga",
+        "scale=smoke",
+        "speed=5",
+        "beta=0.5",
+        "runtime.kind=ray",
+        f"output_root={out}",
+        timeout=240,
+    )
     assert res.returncode == 0, res.stdout + res.stderr
     (run_dir,) = list((out / "hopper-ga").iterdir())
-    for name in ("config.yaml", "best_genome.json", "metrics.json", "fitness_curve.png", "com_path.png", "strip.png", "checkpoints/last.pt"):
+    for name in (
+        "config.yaml",
+        "best_genome.json",
+        "metrics.json",
+        "fitness_curve.png",
+        "com_path.png",
+        "strip.png",
+        "checkpoints/last.pt",
+    ):
         assert (run_dir / name).is_file(), name
     assert list((run_dir / "tb").glob("events.*"))
     metrics = json.loads((run_dir / "metrics.json").read_text())
@@ -92,7 +111,17 @@ def test_cli_train_with_ray_export_and_report(tmp_path):
     ray_best = json.loads((run_dir / "best_genome.json").read_text())["genes"]
     np.testing.assert_array_equal(np.array(list(ray_best.values())), local.best_genome)
 
-    res = run_charctl("export", str(run_dir), "--bvh", str(tmp_path / "run.bvh"), "--video", str(tmp_path / "run.mp4"), "--seconds", "0.2", timeout=240)
+    res = run_charctl(
+        "export",
+        str(run_dir),
+        "--bvh",
+        str(tmp_path / "run.bvh"),
+        "--video",
+        str(tmp_path / "run.mp4"),
+        "--seconds",
+        "0.2",
+        timeout=240,
+    )
     assert res.returncode == 0, res.stdout + res.stderr
     from charctl.motion.bvh import read_bvh
 
@@ -102,16 +131,23 @@ def test_cli_train_with_ray_export_and_report(tmp_path):
 
     from charctl.experiments.hopper_ga.evaluate import evaluate
 
-    evaluate([str(run_dir)], {"curves": True, "out": tmp_path / "report"}, [])  # what `charctl eval RUN --curves -o DIR` calls
+    evaluate(
+        [str(run_dir)], {"curves": True, "out": tmp_path / "report"}, []
+    )  # what `charctl eval RUN --curves -o DIR` calls
     report = (tmp_path / "report" / "report.md").read_text()
     assert "| 5 | 0.5 |" in report and "fitness_curve.png" in report
 
 
-@pytest.mark.parametrize("args, must", [
-    (["train", "hopper-ga", "beta=1.0"], "beta"),
-    (["train", "hopper-ga", "runtime.kind=gpu"], "runtime.kind"),
-    (["train", "hopper-ga", "ga.populaton=5"], "ga.populaton"),
-    (["export", "hopper-ga", "--onnx", "x.onnx"], "--onnx"),
-])
+@pytest.mark.parametrize(
+    "args, must",
+    [
+        (["train", "hopper-ga", "beta=1.0"], "beta"),
+        (["train", "hopper-ga", "runtime.kind=gpu"], "runtime.kind"),
+        (["train", "hopper-ga", "ga.populaton=5"], "ga.populaton"),
+        (["export", "hopper-ga", "--onnx", "x.onnx"], "--onnx"),
+    ],
+)
 def test_cli_bad_input_is_one_line(args, must, tmp_path):
-    assert_one_line_error(run_charctl(*args, f"output_root={tmp_path}") if args[0] == "train" else run_charctl(*args), must)
+    assert_one_line_error(
+        run_charctl(*args, f"output_root={tmp_path}") if args[0] == "train" else run_charctl(*args), must
+    )

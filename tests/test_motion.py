@@ -32,8 +32,13 @@ def bullet():
     """pybullet's humanoid (DIRECT mode, loaded once): (client, body id, {link name: joint index})."""
     pb = pytest.importorskip("pybullet")
     cid = pb.connect(pb.DIRECT)
-    body = pb.loadURDF(str(humanoid_urdf_path()), globalScaling=0.25, flags=pb.URDF_MAINTAIN_LINK_ORDER, physicsClientId=cid)
-    links = {pb.getJointInfo(body, j, physicsClientId=cid)[12].decode(): j for j in range(pb.getNumJoints(body, physicsClientId=cid))}
+    body = pb.loadURDF(
+        str(humanoid_urdf_path()), globalScaling=0.25, flags=pb.URDF_MAINTAIN_LINK_ORDER, physicsClientId=cid
+    )
+    links = {
+        pb.getJointInfo(body, j, physicsClientId=cid)[12].decode(): j
+        for j in range(pb.getNumJoints(body, physicsClientId=cid))
+    }
     yield pb, cid, body, links
     pb.disconnect(cid)
 
@@ -42,7 +47,9 @@ def bullet_pose(bullet, clip: Clip, frame: int) -> tuple[np.ndarray, np.ndarray,
     """Set one clip frame on pybullet's humanoid; return link frame positions (B,3), orientations
     (B,4 xyzw) and link COM positions (B,3), in BODY_NAMES order."""
     pb, cid, body, links = bullet
-    pb.resetBasePositionAndOrientation(body, clip.root_pos[frame].tolist(), clip.local_rot[frame, 0].tolist(), physicsClientId=cid)
+    pb.resetBasePositionAndOrientation(
+        body, clip.root_pos[frame].tolist(), clip.local_rot[frame, 0].tolist(), physicsClientId=cid
+    )
     for b, name in enumerate(BODY_NAMES[1:], start=1):
         q = clip.local_rot[frame, b]
         if name in HINGE_JOINTS:
@@ -107,10 +114,16 @@ _ELBOW_Y = _SHOULDER[1] - 1.099152
 _KNEE_Y = -1.686184
 _ANKLE_Y = _KNEE_Y - 1.639480
 _REST_BODIES = [  # (mass kg, com x, com y) per body, left and right listed separately; z cancels
-    (6.0, 0.0, 0.28), (14.0, 0.0, _CHEST_Y + 0.48), (2.0, 0.0, _CHEST_Y + 0.895576 + 0.7),
+    (6.0, 0.0, 0.28),
+    (14.0, 0.0, _CHEST_Y + 0.48),
+    (2.0, 0.0, _CHEST_Y + 0.895576 + 0.7),
 ] + 2 * [
-    (4.5, 0.0, -0.84), (3.0, 0.0, _KNEE_Y - 0.8), (1.0, 0.18, _ANKLE_Y - 0.09),
-    (1.5, _SHOULDER[0], _SHOULDER[1] - 0.56), (1.0, _SHOULDER[0], _ELBOW_Y - 0.48), (0.5, _SHOULDER[0], _ELBOW_Y - 1.035788),
+    (4.5, 0.0, -0.84),
+    (3.0, 0.0, _KNEE_Y - 0.8),
+    (1.0, 0.18, _ANKLE_Y - 0.09),
+    (1.5, _SHOULDER[0], _SHOULDER[1] - 0.56),
+    (1.0, _SHOULDER[0], _ELBOW_Y - 0.48),
+    (0.5, _SHOULDER[0], _ELBOW_Y - 1.035788),
 ]
 
 
@@ -139,12 +152,16 @@ def test_com_user_mass_table():
     # all mass in the chest: COM = the chest's COM (joint + com_local rotated)
     only_chest = np.zeros(15)
     only_chest[chest] = 3.0
-    chest_com = clip.body_pos[:, chest] + R.rotate(clip.body_rot[:, chest], np.broadcast_to(skel.com_local[chest], (clip.num_frames, 3)))
+    chest_com = clip.body_pos[:, chest] + R.rotate(
+        clip.body_rot[:, chest], np.broadcast_to(skel.com_local[chest], (clip.num_frames, 3))
+    )
     np.testing.assert_allclose(clip.com(only_chest), chest_com, atol=1e-12)
     # an extra 6 kg on the root: weighted average of the old COM and the root's COM
     heavier = skel.masses.copy()
     heavier[0] += 6.0
-    root_com = clip.body_pos[:, 0] + R.rotate(clip.local_rot[:, 0], np.broadcast_to(skel.com_local[0], (clip.num_frames, 3)))
+    root_com = clip.body_pos[:, 0] + R.rotate(
+        clip.local_rot[:, 0], np.broadcast_to(skel.com_local[0], (clip.num_frames, 3))
+    )
     np.testing.assert_allclose(clip.com(heavier), (45.0 * clip.com() + 6.0 * root_com) / 51.0, atol=1e-12)
     # scaling every mass by a constant changes nothing; the default is the model masses
     np.testing.assert_allclose(clip.com(2.5 * skel.masses), clip.com(), atol=1e-12)
@@ -178,7 +195,9 @@ def test_walk_decodes_the_raw_file(walk_raw_frames):
     assert clip.fps == pytest.approx(1.0 / raw[0, 0])
     np.testing.assert_allclose(clip.root_pos, raw[:, 1:4], atol=0)
     # root rotation: file is w-x-y-z, clip is x-y-z-w
-    np.testing.assert_allclose(R.angle_between(clip.local_rot[:, 0], Rotation.from_quat(raw[:, [5, 6, 7, 4]]).as_quat()), 0.0, atol=1e-6)
+    np.testing.assert_allclose(
+        R.angle_between(clip.local_rot[:, 0], Rotation.from_quat(raw[:, [5, 6, 7, 4]]).as_quat()), 0.0, atol=1e-6
+    )
     # hinge joints: the knee angle is a rotation about +z
     col = dict((j, c) for j, c, _ in LAYOUT)["right_knee"]
     knee = clip.local_rot[:, BODY_NAMES.index("right_knee")]
@@ -291,7 +310,9 @@ def test_heading_of_known_rotations():
     q = R.heading_quat(th)
     np.testing.assert_allclose(R.yaw_about_y(q), th, atol=1e-12)
     # +90 degrees about +y turns +x into -z
-    np.testing.assert_allclose(R.rotate(R.heading_quat(np.array(np.pi / 2)), np.array([1.0, 0, 0])), [0, 0, -1], atol=1e-12)
+    np.testing.assert_allclose(
+        R.rotate(R.heading_quat(np.array(np.pi / 2)), np.array([1.0, 0, 0])), [0, 0, -1], atol=1e-12
+    )
 
 
 def test_velocities_of_a_synthetic_spin_and_drift():
@@ -330,7 +351,7 @@ def test_missing_file(tmp_path):
     [
         ("{not json", ["invalid JSON"]),
         ("", ["invalid JSON"]),
-        ('[1, 2, 3]', ["Frames"]),
+        ("[1, 2, 3]", ["Frames"]),
         ('{"Loop": "wrap"}', ["Frames"]),
         ('{"Loop": "wrap", "Frames": [[0.1, 1, 2], [0.1, 1]]}', ["Frames"]),
         ('{"Loop": "wrap", "Frames": [["a", "b"]]}', ["Frames"]),

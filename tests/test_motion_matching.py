@@ -93,8 +93,12 @@ def test_features_of_a_straight_line_clip_have_no_lateral_component():
     from charctl.motion.skeleton import BODY_NAMES
 
     cfg = smoke_cfg("features.past_samples=2", "features.direction_weight=0.5")
-    info = SkeletonInfo("humanoid", list(BODY_NAMES), np.array([1.0, 0.0, 0.0]),
-                        [BODY_NAMES.index("right_ankle"), BODY_NAMES.index("left_ankle")])
+    info = SkeletonInfo(
+        "humanoid",
+        list(BODY_NAMES),
+        np.array([1.0, 0.0, 0.0]),
+        [BODY_NAMES.index("right_ankle"), BODY_NAMES.index("left_ankle")],
+    )
     db = build_database(cfg, [_straight_source(0.7)], info)
     rows = db.search_rows
     assert rows.size > 10
@@ -108,8 +112,12 @@ def test_features_of_a_straight_line_clip_have_no_lateral_component():
     np.testing.assert_allclose(dirs[..., 1], 0.0, atol=1e-12)
     np.testing.assert_allclose(past[..., 1], 0.0, atol=1e-12)
     # forward components by hand: speed * offset / fps ahead, behind for the past, speed for velocities
-    np.testing.assert_allclose(fut[..., 0], np.broadcast_to(1.2 * L.future_offsets / db.fps, fut[..., 0].shape), atol=1e-12)
-    np.testing.assert_allclose(past[..., 0], np.broadcast_to(-1.2 * L.past_offsets / db.fps, past[..., 0].shape), atol=1e-12)
+    np.testing.assert_allclose(
+        fut[..., 0], np.broadcast_to(1.2 * L.future_offsets / db.fps, fut[..., 0].shape), atol=1e-12
+    )
+    np.testing.assert_allclose(
+        past[..., 0], np.broadcast_to(-1.2 * L.past_offsets / db.fps, past[..., 0].shape), atol=1e-12
+    )
     np.testing.assert_allclose(vel[..., 0], 1.2, atol=1e-9)
     np.testing.assert_allclose(dirs[..., 0], 1.0, atol=1e-12)
     # the legs swing in the sagittal plane, so the end points have no lateral velocity either
@@ -161,6 +169,7 @@ def test_rollout_pose_has_no_jump_at_transitions(smoke_db):
     cfg, db = smoke_db
     r = run_path(db, make_index("kdtree", db), make_path("star", cfg.paths), cfg, with_pose=True)
     assert r.jumps > 5
+
     def step(q):  # largest joint rotation per frame
         return R.angle_between(q[1:], q[:-1]).max(axis=1)
 
@@ -181,7 +190,7 @@ def test_root_motion_blend_continues_the_previous_step(smoke_db):
     a, b = int(db.search_rows[5]), int(db.search_rows[-40])
     blend = PoseBlend(db, a, halflife=0.1, with_pose=False, root=True)
     steps, dh = blend.segment(a, a, 10)  # no transition: exactly the database's steps
-    np.testing.assert_allclose(steps, db.step_local[a:a + 10])
+    np.testing.assert_allclose(steps, db.step_local[a : a + 10])
     steps, dh = blend.segment(a + 10, b, 30)  # a jump: the first step is the one that would have come next
     np.testing.assert_allclose(steps[0], db.step_local[a + 10], atol=1e-12)
     assert dh[0] == pytest.approx(db.step_heading[a + 10])
@@ -194,9 +203,9 @@ def test_root_reconstruction_reproduces_a_played_clip(smoke_db):
     _, db = smoke_db
     a = int(db.search_rows[10])
     n = 40
-    g, h = accumulate_root(db.ground[a], db.heading[a], db.step_local[a:a + n], db.step_heading[a:a + n])
-    np.testing.assert_allclose(g, db.ground[a + 1:a + n + 1], atol=1e-9)
-    np.testing.assert_allclose(np.cos(h), np.cos(db.heading[a + 1:a + n + 1]), atol=1e-9)
+    g, h = accumulate_root(db.ground[a], db.heading[a], db.step_local[a : a + n], db.step_heading[a : a + n])
+    np.testing.assert_allclose(g, db.ground[a + 1 : a + n + 1], atol=1e-9)
+    np.testing.assert_allclose(np.cos(h), np.cos(db.heading[a + 1 : a + n + 1]), atol=1e-9)
 
 
 # ---------------------------------------------------------------------------- paths and errors
@@ -241,13 +250,16 @@ def test_path_shapes_and_csv(tmp_path):
     np.testing.assert_allclose(p.point_at(10.0), [2.0, 1.0])  # open paths clamp at the end
 
 
-@pytest.mark.parametrize("text,needle", [
-    ("x,z\n0,0\n1,zero\n", ":3:"),
-    ("0,0\n1,2,3\n", ":2:"),
-    ("0,0\n1;\n", ":2:"),
-    ("0,0\nnan,1\n", ":2:"),
-    ("x,z\n5,5\n", "at least two"),
-])
+@pytest.mark.parametrize(
+    "text,needle",
+    [
+        ("x,z\n0,0\n1,zero\n", ":3:"),
+        ("0,0\n1,2,3\n", ":2:"),
+        ("0,0\n1;\n", ":2:"),
+        ("0,0\nnan,1\n", ":2:"),
+        ("x,z\n5,5\n", "at least two"),
+    ],
+)
 def test_bad_path_csv_is_a_one_line_error(tmp_path, text, needle):
     from charctl.experiments.motion_matching.paths import read_path_csv
 
@@ -263,8 +275,12 @@ def test_bad_path_csv_on_the_command_line(tmp_path):
     f = tmp_path / "bad.csv"
     f.write_text("x,z\n0,0\n1,oops\n")
     exe = Path(sys.executable).with_name("charctl")
-    res = subprocess.run([str(exe), "export", EXP, f"path={f}", "scale=smoke", "--bvh", str(tmp_path / "o.bvh")],
-                         capture_output=True, text=True, timeout=60)
+    res = subprocess.run(
+        [str(exe), "export", EXP, f"path={f}", "scale=smoke", "--bvh", str(tmp_path / "o.bvh")],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
     assert res.returncode == 2
     lines = res.stderr.strip().splitlines()
     assert len(lines) == 1 and "bad.csv:3" in lines[0] and "Traceback" not in res.stderr
@@ -340,12 +356,17 @@ def test_user_bvh_folder_gives_the_same_features_and_exports_its_skeleton(tmp_pa
     sources, _ = humanoid_sources(base)
     folder = tmp_path / "mocap"
     for s in sources:
-        write_bvh(Clip(s.name.replace("/", "_"), s.fps, s.root_pos, s.local_rot), folder / f"{s.name.replace('/', '_')}.bvh")
+        write_bvh(
+            Clip(s.name.replace("/", "_"), s.fps, s.root_pos, s.local_rot), folder / f"{s.name.replace('/', '_')}.bvh"
+        )
     ref = build_database(base, sources, humanoid_sources(base)[1])
     cfg = smoke_cfg(f"data.bvh_dir={folder}")
     db = build_database(cfg)
     assert db.skeleton.kind == "bvh" and db.skeleton.bvh_scale == 1.0  # metre files (root below 5 units)
-    assert [db.skeleton.joint_names[j] for j in db.skeleton.end_joints] in (["right_ankle", "left_ankle"], ["left_ankle", "right_ankle"])
+    assert [db.skeleton.joint_names[j] for j in db.skeleton.end_joints] in (
+        ["right_ankle", "left_ankle"],
+        ["left_ankle", "right_ankle"],
+    )
     np.testing.assert_allclose(db.skeleton.forward, [1.0, 0.0, 0.0])  # forward axis found from the travel direction
     # files are sorted by name: turn_left0 (walker_turn_left0.bvh) comes after walk.bvh in both
     order = np.argsort([n.replace("/", "_") for n in ref.clip_names])

@@ -1,6 +1,5 @@
 """PPO maths: GAE by hand, clipped surrogate, save/load round trip, same seed same weights."""
 
-
 import pytest
 import torch
 

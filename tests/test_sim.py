@@ -67,7 +67,9 @@ def test_batch_of_one_equals_batch_of_64():
     qpos, qvel = clip_to_qpos_qvel(clip)
     targets = qpos[1:11, 7:]
     one = _rollout(BatchedHumanoid(1), qpos[:1], qvel[:1], targets[:, None])
-    many = _rollout(BatchedHumanoid(64), np.repeat(qpos[:1], 64, 0), np.repeat(qvel[:1], 64, 0), np.repeat(targets[:, None], 64, 1))
+    many = _rollout(
+        BatchedHumanoid(64), np.repeat(qpos[:1], 64, 0), np.repeat(qvel[:1], 64, 0), np.repeat(targets[:, None], 64, 1)
+    )
     np.testing.assert_array_equal(many[:, 17], one[:, 0])
     np.testing.assert_array_equal(many[:, 0], many[:, 63])
 

@@ -27,7 +27,9 @@ torch.set_num_threads(1)
 
 
 def make_cfg(**overrides):
-    return OmegaConf.merge(OmegaConf.structured(Config), OmegaConf.from_dotlist([f"{k}={v}" for k, v in overrides.items()]))
+    return OmegaConf.merge(
+        OmegaConf.structured(Config), OmegaConf.from_dotlist([f"{k}={v}" for k, v in overrides.items()])
+    )
 
 
 @pytest.fixture(scope="module")
@@ -112,9 +114,14 @@ def test_qp_solver_paths_agree():
 
 def test_qp_tracks_a_feasible_target_exactly():
     # a desired acceleration reachable inside the cone must be tracked (residual ~ regulariser)
-    batch = QPBatch(points=np.array([[[-0.1, 0, -0.1], [0.1, 0, -0.1], [-0.1, 0, 0.1], [0.1, 0, 0.1]]]), active=np.ones((1, 4), bool),
-                    com=np.array([[0.0, 0.9, 0.0]]), inertia=np.eye(3)[None] * 5.0, ang_vel=np.zeros((1, 3)),
-                    acc_des=np.array([[0.5, 1.0, -0.3, 0.0, 0.0, 0.0]]))
+    batch = QPBatch(
+        points=np.array([[[-0.1, 0, -0.1], [0.1, 0, -0.1], [-0.1, 0, 0.1], [0.1, 0, 0.1]]]),
+        active=np.ones((1, 4), bool),
+        com=np.array([[0.0, 0.9, 0.0]]),
+        inertia=np.eye(3)[None] * 5.0,
+        ang_vel=np.zeros((1, 3)),
+        acc_des=np.array([[0.5, 1.0, -0.3, 0.0, 0.0, 0.0]]),
+    )
     out = solve_batch(batch, QPParams(mass=60.0, mu=1.0), "daqp")
     np.testing.assert_allclose(out["qdd"], batch.acc_des, atol=1e-3)
 
@@ -133,7 +140,9 @@ def test_free_fall_matches_semi_implicit_euler_closed_form(ref, body):
     assert env.pos[0, 1] == pytest.approx(5.0 + 2.0 * n * h + g * h * h * n * (n + 1) / 2, abs=1e-9)
     assert env.pos[0, 0] == pytest.approx(1.0 * n * h, abs=1e-12)
     t = n * h
-    assert env.pos[0, 1] == pytest.approx(5.0 + 2.0 * t + 0.5 * g * t * t, abs=abs(g) * h * t)  # O(h) of the exact parabola
+    assert env.pos[0, 1] == pytest.approx(
+        5.0 + 2.0 * t + 0.5 * g * t * t, abs=abs(g) * h * t
+    )  # O(h) of the exact parabola
 
 
 def test_torque_free_rotation_conserves_angular_momentum(ref, body):
@@ -208,7 +217,9 @@ def test_merge_short_runs_is_cyclic():
     m = np.array([1, 1, 0, 1, 1, 1, 0, 0, 0, 0, 1], dtype=bool)
     out = merge_short_runs(m, 3, cyclic=True)
     np.testing.assert_array_equal(out, [1, 1, 1, 1, 1, 1, 0, 0, 0, 0, 1])
-    np.testing.assert_array_equal(merge_short_runs(np.array([0, 0, 1, 0, 0, 0], bool), 2, cyclic=False), np.zeros(6, bool))
+    np.testing.assert_array_equal(
+        merge_short_runs(np.array([0, 0, 1, 0, 0, 0], bool), 2, cyclic=False), np.zeros(6, bool)
+    )
 
 
 def test_reference_is_continuous_across_cycles(ref):
@@ -310,7 +321,9 @@ def test_fastmath_matches_rotations():
     np.testing.assert_allclose(F.qrot(q, v), R.rotate(q, v), atol=1e-12)
     np.testing.assert_allclose(F.qmul(q, q[::-1]), R.multiply(q, q[::-1]), atol=1e-12)
     np.testing.assert_allclose(F.yaw_of(q), R.yaw_about_y(q), atol=1e-9)
-    np.testing.assert_allclose(F.rotate_yaw(np.full(50, 0.7), v), R.rotate(R.heading_quat(np.full(50, 0.7)), v), atol=1e-12)
+    np.testing.assert_allclose(
+        F.rotate_yaw(np.full(50, 0.7), v), R.rotate(R.heading_quat(np.full(50, 0.7)), v), atol=1e-12
+    )
     np.testing.assert_allclose(F.log_map(q), R.log_map(q), atol=1e-9)
     np.testing.assert_allclose(F.to_matrix(q), R.to_matrix(q), atol=1e-12)
 
@@ -320,8 +333,12 @@ def test_push_case_semantics():
     from charctl.experiments.srb.push import PushCase, window_fraction
 
     c = PushCase("impulse", 300.0, 0.2, 90.0, 0.5, settle_s=1.0)
-    np.testing.assert_allclose(c.direction_world(np.array(0.0)), [0.0, 0.0, -1.0], atol=1e-12)  # left of a +x walker is -z
-    np.testing.assert_allclose(PushCase("impulse", 1, 1, 0.0, 0).direction_world(np.array(np.pi / 2)), [0, 0, -1], atol=1e-12)
+    np.testing.assert_allclose(
+        c.direction_world(np.array(0.0)), [0.0, 0.0, -1.0], atol=1e-12
+    )  # left of a +x walker is -z
+    np.testing.assert_allclose(
+        PushCase("impulse", 1, 1, 0.0, 0).direction_world(np.array(np.pi / 2)), [0, 0, -1], atol=1e-12
+    )
     assert c.impulse_ns == pytest.approx(60.0) and c.start_s == pytest.approx(1.0 + 0.5 * c.cycle_s)
     dt = 1 / 30
     t = np.arange(0, 2, dt)
@@ -333,7 +350,14 @@ def test_push_case_semantics():
 def test_run_push_study_table_and_largest_force():
     from charctl.experiments.srb.push import comparison_markdown, make_cases, run_push_study
 
-    cfg = make_cfg(**{"push.forces": "[100,200,300,400]", "push.durations": "[0.1,0.4]", "push.directions": "[0,180]", "push.phases": "[0.0,0.5]"})
+    cfg = make_cfg(
+        **{
+            "push.forces": "[100,200,300,400]",
+            "push.durations": "[0.1,0.4]",
+            "push.directions": "[0,180]",
+            "push.phases": "[0.0,0.5]",
+        }
+    )
     cases = make_cases(cfg.push)
     assert len(cases) == (1 + 4 + 2) * 2 * 2 and cases[0].kind == "control" and cases[0].force_n == 0.0
     seen = []
@@ -347,7 +371,11 @@ def test_run_push_study_table_and_largest_force():
     assert table.survival("impulse", 200, 0.2) == 1.0 and table.survival("impulse", 300, 0.2) == 0.5
     assert table.survival("impulse", 400, 0.2) == 0.0 and table.survival("sustained", 100, 0.4) == 1.0
     ls = table.largest_survived(0.5)
-    assert ls["largest_force_rate"] == 300 and ls["largest_force_all_survived"] == 200 and ls["first_force_with_fall"] == 300
+    assert (
+        ls["largest_force_rate"] == 300
+        and ls["largest_force_all_survived"] == 200
+        and ls["first_force_with_fall"] == 300
+    )
     md = comparison_markdown([table, None], ["SRB", "full body"], 0.5, "no cgail run")
     assert "| 300 N for 0.2 s | 60 | 0.50 | — |" in md and "full body: missing (no cgail run)" in md
     batch = run_push_study(None, cases, 3, seed=10, simulate_batch=lambda jobs: [fake(c, s) for c, s in jobs])
@@ -361,7 +389,9 @@ def test_smoke_train_resume_push_and_video(tmp_path, smoke_run_copy):
     from charctl.commands.train import train_command
     from charctl.errors import CharctlError
 
-    run_dir = smoke_run_copy("srb")  # `charctl train srb scale=smoke`, the user's path, once per session (test_smoke.py)
+    run_dir = smoke_run_copy(
+        "srb"
+    )  # `charctl train srb scale=smoke`, the user's path, once per session (test_smoke.py)
     metrics = json.loads((run_dir / "metrics.json").read_text())
     assert metrics["samples"] == 2048 and metrics["iterations"] == 2 and metrics["qp_failures"] == 0
     assert 1 <= metrics["episode_length"] <= 90 and (run_dir / "checkpoints" / "last.pt").is_file()
@@ -372,8 +402,17 @@ def test_smoke_train_resume_push_and_video(tmp_path, smoke_run_copy):
     metrics = json.loads((run_dir / "metrics.json").read_text())
     assert metrics["samples"] == 3072 and metrics["iterations"] == 3
 
-    options = {"dtw": False, "confusion": False, "switch": None, "curves": False, "pose_error": False, "push": True,
-               "sweep": False, "episodes": 1, "out": None}
+    options = {
+        "dtw": False,
+        "confusion": False,
+        "switch": None,
+        "curves": False,
+        "pose_error": False,
+        "push": True,
+        "sweep": False,
+        "episodes": 1,
+        "out": None,
+    }
     eval_command([str(run_dir)], options)
     report = (run_dir / "push" / "report.md").read_text()
     assert "Full-body baseline missing" in report and "| 300 N for 0.2 s |" in report
@@ -415,7 +454,9 @@ def test_full_body_baseline_is_found_and_run_through_the_protocol(tmp_path, monk
         d = tmp_path / "repro" / "cgail" / name
         (d / "checkpoints").mkdir(parents=True)
         (d / "checkpoints" / "last.pt").write_bytes(b"x")
-        (d / "config.yaml").write_text(f"experiment: cgail\ncgail: {{conditional: {str(conditional).lower()}}}\nuse_skills: {skills}\n")
+        (d / "config.yaml").write_text(
+            f"experiment: cgail\ncgail: {{conditional: {str(conditional).lower()}}}\nuse_skills: {skills}\n"
+        )
         return d
 
     fake_run("2026-01-01_00-00-00", False, "[walk]")
@@ -425,8 +466,16 @@ def test_full_body_baseline_is_found_and_run_through_the_protocol(tmp_path, monk
     assert find_baseline_run(tmp_path) == str(newest_amp)
     assert _baseline_label(str(newest_amp)).startswith("full body (AMP walk")
     calls = []
-    monkeypatch.setattr(cgail_push, "make_push_simulator", lambda run_dir: (lambda case, seed: calls.append((run_dir, seed)) or case.force_n < 250))
-    cases = make_cases(make_cfg(**{"push.forces": "[200,300]", "push.durations": "[0.1]", "push.directions": "[0]", "push.phases": "[0.0]"}).push)
+    monkeypatch.setattr(
+        cgail_push,
+        "make_push_simulator",
+        lambda run_dir: lambda case, seed: calls.append((run_dir, seed)) or case.force_n < 250,
+    )
+    cases = make_cases(
+        make_cfg(
+            **{"push.forces": "[200,300]", "push.durations": "[0.1]", "push.directions": "[0]", "push.phases": "[0.0]"}
+        ).push
+    )
     table, note = _baseline_table(str(newest_amp), cases, 2, seed=5)
     assert note == "" and len(calls) == len(cases) * 2 and {s for _, s in calls} == {5, 6}
     assert table.survival("impulse", 200, 0.2) == 1.0 and table.survival("impulse", 300, 0.2) == 0.0

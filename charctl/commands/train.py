@@ -13,7 +13,9 @@ def _schema(experiment: str) -> type:
     return load(experiment).config_class()
 
 
-def train_command(experiment: str, overrides: list[str], resume: Path | None = None, multirun: bool = False) -> list[Path]:
+def train_command(
+    experiment: str, overrides: list[str], resume: Path | None = None, multirun: bool = False
+) -> list[Path]:
     """Compose/validate the config, create (or reopen) the run directory, hand over to the experiment."""
     from charctl.config import check_experiment, compose_config, expand_multirun
     from charctl.experiments import load
@@ -59,10 +61,16 @@ def _run(train_fn, run) -> None:
     if stop_signal() is not None:  # a loop that broke out on Ctrl-C / SIGTERM and returned: still an interruption
         from charctl.errors import Interrupted
 
-        raise Interrupted(f"interrupted: checkpoint written to {run.checkpoint_path}; continue with --resume {run.dir}",
-                          signum=stop_signal())
+        raise Interrupted(
+            f"interrupted: checkpoint written to {run.checkpoint_path}; continue with --resume {run.dir}",
+            signum=stop_signal(),
+        )
     if metrics:
-        summary = ", ".join(f"{k}={v:.4g}" if isinstance(v, float) else f"{k}={v}" for k, v in list(metrics.items())[:8] if not isinstance(v, (dict, list)))
+        summary = ", ".join(
+            f"{k}={v:.4g}" if isinstance(v, float) else f"{k}={v}"
+            for k, v in list(metrics.items())[:8]
+            if not isinstance(v, (dict, list))
+        )
         print(f"done: {summary}")
 
 
@@ -71,8 +79,10 @@ def _report_mujoco_warnings(run) -> None:
 
     n = count_mujoco_warnings(run.dir)
     if n:
-        print(f"note: MuJoCo reported {n} simulator warning(s) (unstable states, reset and counted); "
-              f"see {run.dir / MUJOCO_LOG}")
+        print(
+            f"note: MuJoCo reported {n} simulator warning(s) (unstable states, reset and counted); "
+            f"see {run.dir / MUJOCO_LOG}"
+        )
 
 
 def print_config(experiment: str, overrides: list[str]) -> None:

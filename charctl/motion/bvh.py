@@ -153,11 +153,22 @@ def _parse(tok: list[str], src: str) -> BvhMotion:
     values = np.array([float(x) for x in tok[i + 6 :]])
     width = sum(len(c) for c in channels)
     if values.size != n_frames * width:
-        raise CharctlError(f"{src}: malformed BVH ({values.size} motion values, expected {n_frames} frames x {width} channels)")
+        raise CharctlError(
+            f"{src}: malformed BVH ({values.size} motion values, expected {n_frames} frames x {width} channels)"
+        )
     if frame_time <= 0 or not np.all(np.isfinite(values)):
         raise CharctlError(f"{src}: malformed BVH (non-positive frame time or non-finite values)")
     # re-map end-site parent markers (-2 placeholders never reach `parents`)
-    return BvhMotion(names, np.array(parents), np.array(offsets), channels, values.reshape(n_frames, width), frame_time, end_sites, src)
+    return BvhMotion(
+        names,
+        np.array(parents),
+        np.array(offsets),
+        channels,
+        values.reshape(n_frames, width),
+        frame_time,
+        end_sites,
+        src,
+    )
 
 
 def read_bvh_as_clip(path: str | Path) -> Clip:
@@ -172,7 +183,14 @@ def read_bvh_as_clip(path: str | Path) -> Clip:
         )
     trans, rot = motion.local_transforms()
     idx = [motion.names.index(n) for n in skel.names]
-    return Clip(name=Path(path).stem, fps=motion.fps, root_pos=trans[:, idx[0]].copy(), local_rot=rot[:, idx], source=str(path), skeleton=skel)
+    return Clip(
+        name=Path(path).stem,
+        fps=motion.fps,
+        root_pos=trans[:, idx[0]].copy(),
+        local_rot=rot[:, idx],
+        source=str(path),
+        skeleton=skel,
+    )
 
 
 # ---------------------------------------------------------------------------- writing
@@ -203,7 +221,9 @@ def write_bvh(clip: Clip, path: str | Path, fps: float | None = None) -> Path:
             emit(c, depth + 1)
         if not children[b]:
             e = _END_SITES.get(skel.names[b], (0.0, 0.05, 0.0))
-            lines.extend([f"{pad}\tEnd Site", pad + "\t{", f"{pad}\t\tOFFSET {e[0]:.6f} {e[1]:.6f} {e[2]:.6f}", pad + "\t}"])
+            lines.extend(
+                [f"{pad}\tEnd Site", pad + "\t{", f"{pad}\t\tOFFSET {e[0]:.6f} {e[1]:.6f} {e[2]:.6f}", pad + "\t}"]
+            )
         lines.append(pad + "}")
 
     emit(0, 0)

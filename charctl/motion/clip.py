@@ -111,7 +111,9 @@ class Clip:
         i0 = np.clip(np.floor(src).astype(int), 0, self.num_frames - 2)
         w = src - i0
         pos = (1 - w)[:, None] * self.root_pos[i0] + w[:, None] * self.root_pos[i0 + 1]
-        rot = R.slerp(self.local_rot[i0], self.local_rot[i0 + 1], np.broadcast_to(w[:, None], (n_new, self.skeleton.num_bodies)))
+        rot = R.slerp(
+            self.local_rot[i0], self.local_rot[i0 + 1], np.broadcast_to(w[:, None], (n_new, self.skeleton.num_bodies))
+        )
         new_fps = (n_new - 1) / self.duration if self.duration > 0 else fps
         return self.replace(fps=new_fps, root_pos=pos, local_rot=rot)
 

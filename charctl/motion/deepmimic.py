@@ -57,7 +57,16 @@ def decode_frames(frames: np.ndarray, name: str, loop: bool = False, label: str 
     if steps.size == 0:
         raise CharctlError(f"{source or name}: all frame durations are zero")
     dt = float(np.median(steps))
-    clip = Clip(name=name, fps=1.0 / dt, root_pos=frames[:, 1:4].copy(), local_rot=local, loop=loop, label=label, source=source, skeleton=skel)
+    clip = Clip(
+        name=name,
+        fps=1.0 / dt,
+        root_pos=frames[:, 1:4].copy(),
+        local_rot=local,
+        loop=loop,
+        label=label,
+        source=source,
+        skeleton=skel,
+    )
     if np.any(np.abs(steps - dt) > 0.01 * dt):  # non-uniform: resample onto a uniform grid
         clip = _resample_nonuniform(clip, np.concatenate([[0.0], np.cumsum(dts[:-1])]), dt)
     return clip
@@ -129,8 +138,10 @@ def read_deepmimic(path: str | Path, name: str | None = None, label: str = "") -
     zero = _zero_quaternion(frames)
     if zero is not None:
         frame, col, joint = zero
-        raise CharctlError(f"{path}: frame {frame}, columns {col}-{col + 3} ({joint} quaternion w-x-y-z) are all zero; "
-                           "a rotation quaternion must have a non-zero length")
+        raise CharctlError(
+            f"{path}: frame {frame}, columns {col}-{col + 3} ({joint} quaternion w-x-y-z) are all zero; "
+            "a rotation quaternion must have a non-zero length"
+        )
     return decode_frames(frames, name or path.stem, loop=loop == "wrap", label=label, source=str(path))
 
 

@@ -12,9 +12,7 @@ from charctl.motion import rotations as R
 from charctl.motion.skeleton import Skeleton
 
 
-def forward_kinematics(
-    skel: Skeleton, root_pos: np.ndarray, local_rot: np.ndarray
-) -> tuple[np.ndarray, np.ndarray]:
+def forward_kinematics(skel: Skeleton, root_pos: np.ndarray, local_rot: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Body frame positions and rotations.
 
     Args:
@@ -32,13 +30,18 @@ def forward_kinematics(
     for level in skel.depth_levels[1:]:
         par = skel.parents[level]
         prot = rot[..., par, :]
-        pos[..., level, :] = pos[..., par, :] + R.rotate(prot, np.broadcast_to(skel.offsets[level], prot.shape[:-1] + (3,)))
+        pos[..., level, :] = pos[..., par, :] + R.rotate(
+            prot, np.broadcast_to(skel.offsets[level], prot.shape[:-1] + (3,))
+        )
         rot[..., level, :] = R.multiply(prot, local_rot[..., level, :])
     return pos, rot
 
 
 def center_of_mass(
-    skel: Skeleton, pos: np.ndarray, rot: np.ndarray, masses: np.ndarray | None = None,
+    skel: Skeleton,
+    pos: np.ndarray,
+    rot: np.ndarray,
+    masses: np.ndarray | None = None,
     com_local: np.ndarray | None = None,
 ) -> np.ndarray:
     """Whole-body centre of mass (..., 3), world frame.

@@ -22,16 +22,36 @@ from charctl.errors import CharctlError
 URDF_SCALE = 0.25
 
 BODY_NAMES: tuple[str, ...] = (
-    "root", "chest", "neck",
-    "right_hip", "right_knee", "right_ankle",
-    "right_shoulder", "right_elbow", "right_wrist",
-    "left_hip", "left_knee", "left_ankle",
-    "left_shoulder", "left_elbow", "left_wrist",
+    "root",
+    "chest",
+    "neck",
+    "right_hip",
+    "right_knee",
+    "right_ankle",
+    "right_shoulder",
+    "right_elbow",
+    "right_wrist",
+    "left_hip",
+    "left_knee",
+    "left_ankle",
+    "left_shoulder",
+    "left_elbow",
+    "left_wrist",
 )
 # Movable joints in the order of a DeepMimic frame (after dt, root position, root rotation).
 CLIP_JOINTS: tuple[str, ...] = (
-    "chest", "neck", "right_hip", "right_knee", "right_ankle", "right_shoulder", "right_elbow",
-    "left_hip", "left_knee", "left_ankle", "left_shoulder", "left_elbow",
+    "chest",
+    "neck",
+    "right_hip",
+    "right_knee",
+    "right_ankle",
+    "right_shoulder",
+    "right_elbow",
+    "left_hip",
+    "left_knee",
+    "left_ankle",
+    "left_shoulder",
+    "left_elbow",
 )
 HINGE_JOINTS: frozenset[str] = frozenset({"right_knee", "right_elbow", "left_knee", "left_elbow"})
 END_EFFECTORS: tuple[str, ...] = ("right_ankle", "left_ankle", "right_wrist", "left_wrist")
@@ -39,11 +59,21 @@ FEET: tuple[str, ...] = ("right_ankle", "left_ankle")
 
 # Masses (kg) the foundation issue fixes; they equal the URDF's (total 45 kg).
 BODY_MASS: dict[str, float] = {
-    "root": 6.0, "chest": 14.0, "neck": 2.0,
-    "right_hip": 4.5, "right_knee": 3.0, "right_ankle": 1.0,
-    "right_shoulder": 1.5, "right_elbow": 1.0, "right_wrist": 0.5,
-    "left_hip": 4.5, "left_knee": 3.0, "left_ankle": 1.0,
-    "left_shoulder": 1.5, "left_elbow": 1.0, "left_wrist": 0.5,
+    "root": 6.0,
+    "chest": 14.0,
+    "neck": 2.0,
+    "right_hip": 4.5,
+    "right_knee": 3.0,
+    "right_ankle": 1.0,
+    "right_shoulder": 1.5,
+    "right_elbow": 1.0,
+    "right_wrist": 0.5,
+    "left_hip": 4.5,
+    "left_knee": 3.0,
+    "left_ankle": 1.0,
+    "left_shoulder": 1.5,
+    "left_elbow": 1.0,
+    "left_wrist": 0.5,
 }
 
 

@@ -10,8 +10,14 @@ from torch import nn
 ACTIVATIONS: dict[str, type[nn.Module]] = {"relu": nn.ReLU, "tanh": nn.Tanh, "elu": nn.ELU, "silu": nn.SiLU}
 
 
-def mlp(in_dim: int, hidden: Sequence[int], out_dim: int, activation: str = "relu", spectral_norm: bool = False,
-        out_gain: float = 1.0) -> nn.Sequential:
+def mlp(
+    in_dim: int,
+    hidden: Sequence[int],
+    out_dim: int,
+    activation: str = "relu",
+    spectral_norm: bool = False,
+    out_gain: float = 1.0,
+) -> nn.Sequential:
     """Linear-activation stack in_dim -> hidden... -> out_dim (no activation on the output).
 
     `spectral_norm` wraps every Linear layer (torch.nn.utils.parametrizations.spectral_norm).

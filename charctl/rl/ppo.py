@@ -55,8 +55,16 @@ class ActorCritic(nn.Module):
         return action, logp, value
 
 
-def ppo_losses(new_logp: torch.Tensor, old_logp: torch.Tensor, advantages: torch.Tensor, values: torch.Tensor,
-               old_values: torch.Tensor, returns: torch.Tensor, clip: float, value_clip: float = 0.0) -> dict[str, torch.Tensor]:
+def ppo_losses(
+    new_logp: torch.Tensor,
+    old_logp: torch.Tensor,
+    advantages: torch.Tensor,
+    values: torch.Tensor,
+    old_values: torch.Tensor,
+    returns: torch.Tensor,
+    clip: float,
+    value_clip: float = 0.0,
+) -> dict[str, torch.Tensor]:
     """Clipped surrogate and value losses (to minimise) and diagnostics.
 
     L_pi = -E[min(rho A, clip(rho, 1-eps, 1+eps) A)], rho = exp(new_logp - old_logp);
@@ -101,7 +109,16 @@ class PPO:
                 dist = self.model.distribution(obs, cond)
                 new_logp = dist.log_prob(data["actions"][idx]).sum(-1)
                 values = self.model.value(obs, cond)
-                losses = ppo_losses(new_logp, data["log_probs"][idx], adv, values, data["values"][idx], data["returns"][idx], cfg.clip, cfg.value_clip)
+                losses = ppo_losses(
+                    new_logp,
+                    data["log_probs"][idx],
+                    adv,
+                    values,
+                    data["values"][idx],
+                    data["returns"][idx],
+                    cfg.clip,
+                    cfg.value_clip,
+                )
                 entropy = dist.entropy().sum(-1).mean()
                 loss = losses["policy"] + cfg.value_coef * losses["value"] - cfg.entropy_coef * entropy
                 self.optimizer.zero_grad(set_to_none=True)

@@ -74,8 +74,9 @@ def _stop_if_diverged(learner: Learner, run, stats: dict[str, float]) -> None:
         check_finite(stats, *learner.modules(), where=f"iteration {learner.iteration}", checkpoint=run.checkpoint_path)
     except CharctlError as exc:
         run.log_scalars({k: v for k, v in stats.items() if math.isfinite(v)}, learner.samples)
-        run.write_metrics({"diverged": True, "error": str(exc), "iterations": learner.iteration,
-                           "samples": learner.samples})
+        run.write_metrics(
+            {"diverged": True, "error": str(exc), "iterations": learner.iteration, "samples": learner.samples}
+        )
         run.close()
         raise
 

@@ -5,8 +5,14 @@ from __future__ import annotations
 import torch
 
 
-def compute_gae(rewards: torch.Tensor, values: torch.Tensor, dones: torch.Tensor, last_values: torch.Tensor,
-                gamma: float, lam: float) -> tuple[torch.Tensor, torch.Tensor]:
+def compute_gae(
+    rewards: torch.Tensor,
+    values: torch.Tensor,
+    dones: torch.Tensor,
+    last_values: torch.Tensor,
+    gamma: float,
+    lam: float,
+) -> tuple[torch.Tensor, torch.Tensor]:
     """GAE(gamma, lambda) over a (T, N) rollout.
 
     delta_t = r_t + gamma * V_{t+1} * (1 - d_t) - V_t;  A_t = delta_t + gamma * lam * (1 - d_t) * A_{t+1}.
@@ -29,7 +35,9 @@ def compute_gae(rewards: torch.Tensor, values: torch.Tensor, dones: torch.Tensor
 class RolloutStorage:
     """(T, N) buffers of one rollout: obs, optional conditioning, actions, log-probs, values, rewards, dones."""
 
-    def __init__(self, steps: int, envs: int, obs_dim: int, act_dim: int, cond_dim: int = 0, device: str | torch.device = "cpu"):
+    def __init__(
+        self, steps: int, envs: int, obs_dim: int, act_dim: int, cond_dim: int = 0, device: str | torch.device = "cpu"
+    ):
         z = lambda *s: torch.zeros(*s, device=device)  # noqa: E731
         self.obs = z(steps, envs, obs_dim)
         self.cond = z(steps, envs, cond_dim)
@@ -63,5 +71,7 @@ class RolloutStorage:
     def flat(self) -> dict[str, torch.Tensor]:
         """All buffers flattened to (T*N, ...)."""
         n = self.steps * self.envs
-        return {k: getattr(self, k).reshape(n, *getattr(self, k).shape[2:])
-                for k in ("obs", "cond", "actions", "log_probs", "values", "advantages", "returns")}
+        return {
+            k: getattr(self, k).reshape(n, *getattr(self, k).shape[2:])
+            for k in ("obs", "cond", "actions", "log_probs", "values", "advantages", "returns")
+        }

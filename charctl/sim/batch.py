@@ -36,7 +36,9 @@ class SimSettings:
 class BatchedHumanoid:
     """`num_envs` humanoids; arrays are (num_envs, ...) live views (world frame, y-up)."""
 
-    def __init__(self, num_envs: int, settings: SimSettings | None = None, reset_fn: Callable[[np.ndarray], None] | None = None):
+    def __init__(
+        self, num_envs: int, settings: SimSettings | None = None, reset_fn: Callable[[np.ndarray], None] | None = None
+    ):
         import mujoco
         import mujoco.batch
 
@@ -121,7 +123,11 @@ class BatchedHumanoid:
         w = np.asarray(self.batch.warning)  # (N, mjNWARNING, 2)
         import mujoco
 
-        cols = [int(mujoco.mjtWarning.mjWARN_BADQACC), int(mujoco.mjtWarning.mjWARN_BADQPOS), int(mujoco.mjtWarning.mjWARN_BADQVEL)]
+        cols = [
+            int(mujoco.mjtWarning.mjWARN_BADQACC),
+            int(mujoco.mjtWarning.mjWARN_BADQPOS),
+            int(mujoco.mjtWarning.mjWARN_BADQVEL),
+        ]
         counts = w[:, cols, 1].sum(axis=1)  # mjWarningStat = (lastinfo, number)
         prev = getattr(self, "_warn_prev", None)
         self._warn_prev = counts.copy()

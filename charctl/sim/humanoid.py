@@ -30,16 +30,24 @@ from charctl.sim.scene import scene_assets, scene_ground
 # largest |middle angle| over all 20 clips and their mirrors (scripts/choose_euler_orders.py):
 # chest ZYX 25 deg, neck YXZ 38, hips ZYX 55, ankles YXZ 51, shoulders XYZ 80.
 EULER_ORDER: dict[str, str] = {
-    "chest": "ZYX", "neck": "YXZ",
-    "right_hip": "ZYX", "left_hip": "ZYX",
-    "right_ankle": "YXZ", "left_ankle": "YXZ",
-    "right_shoulder": "XYZ", "left_shoulder": "XYZ",
+    "chest": "ZYX",
+    "neck": "YXZ",
+    "right_hip": "ZYX",
+    "left_hip": "ZYX",
+    "right_ankle": "YXZ",
+    "left_ankle": "YXZ",
+    "right_shoulder": "XYZ",
+    "left_shoulder": "XYZ",
 }
 # PD gains (kp N m/rad, kd N m s/rad) and torque limits (N m) per joint, from DeepMimic.
 PD_GAINS: dict[str, tuple[float, float, float]] = {
-    "chest": (1000.0, 100.0, 200.0), "neck": (100.0, 10.0, 50.0),
-    "hip": (500.0, 50.0, 200.0), "knee": (500.0, 50.0, 150.0), "ankle": (400.0, 40.0, 90.0),
-    "shoulder": (400.0, 40.0, 100.0), "elbow": (300.0, 30.0, 60.0),
+    "chest": (1000.0, 100.0, 200.0),
+    "neck": (100.0, 10.0, 50.0),
+    "hip": (500.0, 50.0, 200.0),
+    "knee": (500.0, 50.0, 150.0),
+    "ankle": (400.0, 40.0, 90.0),
+    "shoulder": (400.0, 40.0, 100.0),
+    "elbow": (300.0, 30.0, 60.0),
 }
 HINGE_LIMITS = {"knee": (-3.14, 0.0), "elbow": (0.0, 3.14)}
 _AXES = {"X": "1 0 0", "Y": "0 1 0", "Z": "0 0 1"}
@@ -101,9 +109,15 @@ def build_mjcf(
         if g.kind == "capsule":
             r, half = g.size
             a, c = p + [0, half, 0], p - [0, half, 0]
-            return f'<geom type="capsule" size="{r:.5f}" ' f'fromto="{a[0]:.5f} {a[1]:.5f} {a[2]:.5f} {c[0]:.5f} {c[1]:.5f} {c[2]:.5f}" {common}/>'
+            return (
+                f'<geom type="capsule" size="{r:.5f}" '
+                f'fromto="{a[0]:.5f} {a[1]:.5f} {a[2]:.5f} {c[0]:.5f} {c[1]:.5f} {c[2]:.5f}" {common}/>'
+            )
         h = g.size
-        return f'<geom type="box" size="{h[0]:.5f} {h[1]:.5f} {h[2]:.5f}" ' f'pos="{p[0]:.5f} {p[1]:.5f} {p[2]:.5f}" {common}/>'
+        return (
+            f'<geom type="box" size="{h[0]:.5f} {h[1]:.5f} {h[2]:.5f}" '
+            f'pos="{p[0]:.5f} {p[1]:.5f} {p[2]:.5f}" {common}/>'
+        )
 
     def emit(b: int, depth: int) -> None:
         name = skel.names[b]
@@ -118,7 +132,9 @@ def build_mjcf(
             kp, kd, lim = PD_GAINS[_kind(name)]
             if name in HINGE_JOINTS:
                 lo, hi = HINGE_LIMITS[_kind(name)]
-                lines.append(f'{pad}  <joint name="{name}" type="hinge" axis="0 0 1" range="{lo} {hi}" limited="true"/>')
+                lines.append(
+                    f'{pad}  <joint name="{name}" type="hinge" axis="0 0 1" range="{lo} {hi}" limited="true"/>'
+                )
                 actuators.append(_actuator(name, kp, kd, lim))
             else:
                 for axis in EULER_ORDER[name]:
@@ -157,7 +173,10 @@ def build_mjcf(
 
 
 def _actuator(joint: str, kp: float, kd: float, limit: float) -> str:
-    return f'<position name="{joint}" joint="{joint}" kp="{kp}" kv="{kd}" ' f'forcelimited="true" forcerange="{-limit} {limit}"/>'
+    return (
+        f'<position name="{joint}" joint="{joint}" kp="{kp}" kv="{kd}" '
+        f'forcelimited="true" forcerange="{-limit} {limit}"/>'
+    )
 
 
 def _color(name: str) -> str:

@@ -52,8 +52,9 @@ def write_video(frames: list[np.ndarray], path: str | Path, fps: float) -> Path:
     check_output_file(path, "video")
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
-        with imageio.get_writer(tmp, fps=float(fps), codec="libx264", quality=7, macro_block_size=8,
-                                ffmpeg_log_level="quiet") as w:
+        with imageio.get_writer(
+            tmp, fps=float(fps), codec="libx264", quality=7, macro_block_size=8, ffmpeg_log_level="quiet"
+        ) as w:
             for f in frames:
                 w.append_data(np.asarray(f, dtype=np.uint8))
         if not tmp.is_file() or tmp.stat().st_size == 0:  # ffmpeg died without an error imageio noticed

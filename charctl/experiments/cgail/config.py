@@ -29,8 +29,14 @@ def paper_skills() -> list[SkillConfig]:
     left out of the paper set; add them to `skills` to use them."""
     locomotion = [SkillConfig(name, name, heading_goal=True) for name in ("walk", "run")]
     others = [
-        ("jump", "jump"), ("breakdance", "dance_b"), ("spindance", "dance_a"), ("uppercut", "spinkick"),
-        ("left_punch", "punch:mirror"), ("right_punch", "punch"), ("right_kick", "kick"), ("left_kick", "kick:mirror"),
+        ("jump", "jump"),
+        ("breakdance", "dance_b"),
+        ("spindance", "dance_a"),
+        ("uppercut", "spinkick"),
+        ("left_punch", "punch:mirror"),
+        ("right_punch", "punch"),
+        ("right_kick", "kick"),
+        ("left_kick", "kick:mirror"),
     ]
     return locomotion + [SkillConfig(name, clip) for name, clip in others]
 

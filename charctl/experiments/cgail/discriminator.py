@@ -22,7 +22,9 @@ SN = nn.utils.parametrizations.spectral_norm
 
 
 class Discriminator(nn.Module):
-    def __init__(self, pair_dim: int, num_classes: int, hidden: list[int], conditional: bool = True, activation: str = "relu"):
+    def __init__(
+        self, pair_dim: int, num_classes: int, hidden: list[int], conditional: bool = True, activation: str = "relu"
+    ):
         super().__init__()
         self.norm = RunningNorm(pair_dim, clip=10.0)
         layers: list[nn.Module] = []
@@ -55,12 +57,12 @@ def style_loss(d_data: torch.Tensor, d_policy: torch.Tensor, kind: str = "lsgan"
     raise ValueError(f"unknown style loss {kind!r}")
 
 
-def logit_regulariser(disc: "Discriminator") -> torch.Tensor:
+def logit_regulariser(disc: Discriminator) -> torch.Tensor:
     """Sum of squares of the style head's weights (the 'logit regularisation' of AMP)."""
     return (disc.style_head.weight**2).sum()
 
 
-def weight_decay_term(disc: "Discriminator") -> torch.Tensor:
+def weight_decay_term(disc: Discriminator) -> torch.Tensor:
     """Sum of squares of every linear weight of trunk and heads (biases excluded)."""
     return sum((m.weight**2).sum() for m in disc.modules() if isinstance(m, nn.Linear))
 
@@ -146,8 +148,12 @@ class ReplayBuffer:
 
     def state_dict(self) -> dict:
         n = self.size
-        return {"pairs": self.pairs[:n].to("cpu", copy=True), "cond": self.cond[:n].to("cpu", copy=True),
-                "pos": self.pos, "size": n}
+        return {
+            "pairs": self.pairs[:n].to("cpu", copy=True),
+            "cond": self.cond[:n].to("cpu", copy=True),
+            "pos": self.pos,
+            "size": n,
+        }
 
     def load_state_dict(self, s: dict) -> None:
         n = int(s["size"])

@@ -28,7 +28,11 @@ PHASE_DIM = 2  # (cos, sin) of the clip phase, in the state of the tracking base
 TRACK_WEIGHTS = {"pose": 0.65, "vel": 0.1, "ee": 0.15, "root": 0.1}
 TRACK_SCALES = {"pose": 1.0, "vel": 0.1, "ee": 40.0, "root_height": 10.0, "root_vel": 1.0}
 _OBS_ROOT_H, _OBS_ROOT_V, _OBS_ROT, _OBS_VEL, _OBS_EE = (
-    slice(0, 1), slice(1, 4), slice(7, 79), slice(79, 121), slice(121, 133),
+    slice(0, 1),
+    slice(1, 4),
+    slice(7, 79),
+    slice(79, 121),
+    slice(121, 133),
 )
 
 
@@ -40,13 +44,18 @@ def tracking_reward(obs: np.ndarray, ref: np.ndarray) -> np.ndarray:
     (joint rotations as the first two rotation-matrix columns; velocities in m/s; positions in m,
     relative to the root in the heading frame).
     """
+
     def sq(sl: slice) -> np.ndarray:
         return np.sum((obs[:, sl] - ref[:, sl]) ** 2, axis=1)
 
     w, k = TRACK_WEIGHTS, TRACK_SCALES
     root = np.exp(-k["root_height"] * sq(_OBS_ROOT_H) - k["root_vel"] * sq(_OBS_ROOT_V))
-    return (w["pose"] * np.exp(-k["pose"] * sq(_OBS_ROT)) + w["vel"] * np.exp(-k["vel"] * sq(_OBS_VEL))
-            + w["ee"] * np.exp(-k["ee"] * sq(_OBS_EE)) + w["root"] * root)
+    return (
+        w["pose"] * np.exp(-k["pose"] * sq(_OBS_ROT))
+        + w["vel"] * np.exp(-k["vel"] * sq(_OBS_VEL))
+        + w["ee"] * np.exp(-k["ee"] * sq(_OBS_EE))
+        + w["root"] * root
+    )
 
 
 @dataclass
@@ -63,15 +72,18 @@ class StepResult:
 
 
 class CgailEnv:
-    def __init__(self, skills: list[SkillData], env_cfg, seed: int = 0, conditional: bool = True,
-                 tracking: bool = False):
+    def __init__(
+        self, skills: list[SkillData], env_cfg, seed: int = 0, conditional: bool = True, tracking: bool = False
+    ):
         self.skills = skills
         self.tracking = tracking  # phase in the state, reference frame advanced every step
         self.cfg = env_cfg
         self.K = len(skills)
         self.conditional = conditional
         self.rng = np.random.default_rng(seed)
-        self.sim = BatchedHumanoid(env_cfg.num_envs, SimSettings(physics_hz=env_cfg.physics_hz, control_hz=env_cfg.control_hz))
+        self.sim = BatchedHumanoid(
+            env_cfg.num_envs, SimSettings(physics_hz=env_cfg.physics_hz, control_hz=env_cfg.control_hz)
+        )
         self.N = env_cfg.num_envs
         self.max_steps = int(round(env_cfg.episode_seconds * env_cfg.control_hz))
         self.cmd = np.zeros(self.N, dtype=np.int64)  # B: current command
@@ -237,7 +249,9 @@ class CgailEnv:
         if done.size:
             self.reset(done)
         self._maybe_switch(np.setdiff1d(np.arange(self.N), done))
-        return StepResult(self._state, self._obs, pair_next, final_state, r_goal, r_track, terminated, truncated, unstable)
+        return StepResult(
+            self._state, self._obs, pair_next, final_state, r_goal, r_track, terminated, truncated, unstable
+        )
 
     def _goal_reward(self, k) -> np.ndarray:
         """r_G in [0, 1]: exp(-sharpness (v* - d . v_xz)^2) for locomotion skills, else 1."""

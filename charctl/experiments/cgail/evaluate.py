@@ -26,9 +26,16 @@ from charctl.experiments.cgail.policy import TrainedRun, load_trained_run, local
 
 # Table 6.1 of the paper: per-motion mean per-frame pose error after DTW (AMP, cGAIL).
 PAPER_TABLE_6_1 = {
-    "walk": (2.462, 1.456), "run": (2.162, 0.808), "jump": (2.984, 1.781), "breakdance": (2.984, 2.233),
-    "spindance": (1.397, 1.051), "uppercut": (1.307, 0.659), "left_punch": (1.125, 1.412),
-    "right_punch": (0.881, 1.145), "right_kick": (1.942, 1.367), "left_kick": (2.301, 1.672),
+    "walk": (2.462, 1.456),
+    "run": (2.162, 0.808),
+    "jump": (2.984, 1.781),
+    "breakdance": (2.984, 2.233),
+    "spindance": (1.397, 1.051),
+    "uppercut": (1.307, 0.659),
+    "left_punch": (1.125, 1.412),
+    "right_punch": (0.881, 1.145),
+    "right_kick": (1.942, 1.367),
+    "left_kick": (2.301, 1.672),
 }
 
 
@@ -82,7 +89,7 @@ def skill_reference(tr: TrainedRun, skill: int, frames: int) -> np.ndarray:
     rot = ref.local_rot
     if ref.loop and frames > len(rot):
         reps = int(np.ceil(frames / (len(rot) - 1)))
-        rot = np.concatenate([rot[:-1]] * reps + [rot[-1:]])[: frames]
+        rot = np.concatenate([rot[:-1]] * reps + [rot[-1:]])[:frames]
     return rot
 
 
@@ -113,8 +120,12 @@ def eval_dtw(runs: list[TrainedRun], episodes: int, out: Path) -> dict:
             table[s][f"{tr.label} falls"] = ro.falls
         if s in PAPER_TABLE_6_1:
             table[s]["paper AMP"], table[s]["paper cGAIL"] = PAPER_TABLE_6_1[s]
-    result = {"table": table, "episodes": episodes, "runs": {tr.label: str(tr.run_dir) for tr in runs},
-              "metric": "mean per-frame e_pose (radians, l2 over the 12 joints) along the DTW path, RSI at frame 0"}
+    result = {
+        "table": table,
+        "episodes": episodes,
+        "runs": {tr.label: str(tr.run_dir) for tr in runs},
+        "metric": "mean per-frame e_pose (radians, l2 over the 12 joints) along the DTW path, RSI at frame 0",
+    }
     _write_json(out / "dtw.json", result)
     cols = sorted({c for row in table.values() for c in row}, key=_column_order)
     with open(out / "dtw.csv", "w", newline="") as fh:
@@ -162,13 +173,20 @@ def eval_survival(runs: list[TrainedRun], episodes: int, seconds: float, out: Pa
             row[f"{tr.label} no-fall"] = r["no_fall"]
             if "class_acc_policy" in r:
                 row[f"{tr.label} class acc"] = r["class_acc_policy"]
-    result = {"table": table, "episodes": episodes, "seconds": seconds, "runs": {tr.label: str(tr.run_dir) for tr in runs},
-              "metric": "no-fall: share of episodes without a non-foot ground contact (RSI at random frames and "
-                        "headings, mean actions); class acc: classifier argmax == command on the policy's pairs"}
+    result = {
+        "table": table,
+        "episodes": episodes,
+        "seconds": seconds,
+        "runs": {tr.label: str(tr.run_dir) for tr in runs},
+        "metric": "no-fall: share of episodes without a non-foot ground contact (RSI at random frames and "
+        "headings, mean actions); class acc: classifier argmax == command on the policy's pairs",
+    }
     _write_json(out / "survival.json", result)
     cols = sorted({c for row in table.values() for c in row})
     _print_table(f"Survival over {seconds:g}-s episodes ({episodes} per skill)", table, cols)
-    _append_report(out, f"Survival — {seconds:g}-s episodes, {episodes} per skill", _markdown_table(table, cols), result["metric"])
+    _append_report(
+        out, f"Survival — {seconds:g}-s episodes, {episodes} per skill", _markdown_table(table, cols), result["metric"]
+    )
     return result
 
 
@@ -186,8 +204,14 @@ def eval_confusion(tr: TrainedRun, episodes: int, out: Path) -> dict:
         for k, p in enumerate(tr.agent.demos.pairs):
             _, logits = tr.agent.disc(torch.from_numpy(p))
             data[k] = F.softmax(logits, -1).mean(0).numpy()
-    result = {"skills": tr.skill_names, "policy": policy.tolist(), "data": data.tolist(),
-              "policy_diagonal": np.diag(policy).tolist(), "data_diagonal": np.diag(data).tolist(), "run": str(tr.run_dir)}
+    result = {
+        "skills": tr.skill_names,
+        "policy": policy.tolist(),
+        "data": data.tolist(),
+        "policy_diagonal": np.diag(policy).tolist(),
+        "data_diagonal": np.diag(data).tolist(),
+        "run": str(tr.run_dir),
+    }
     _write_json(out / "confusion.json", result)
     from charctl.viz.plots import new_figure, save_figure
 
@@ -200,18 +224,32 @@ def eval_confusion(tr: TrainedRun, episodes: int, out: Path) -> dict:
         ax.set_title(title)
         for i in range(K):
             for j in range(K):
-                ax.text(j, i, f"{mat[i, j]:.2f}", ha="center", va="center", color="white" if mat[i, j] > 0.5 else "black", fontsize=8)
+                ax.text(
+                    j,
+                    i,
+                    f"{mat[i, j]:.2f}",
+                    ha="center",
+                    va="center",
+                    color="white" if mat[i, j] > 0.5 else "black",
+                    fontsize=8,
+                )
     fig.colorbar(im, ax=axes, shrink=0.8)
     save_figure(fig, out / "confusion.png")
     rows = {s: {"policy P(correct)": policy[k, k], "data P(correct)": data[k, k]} for k, s in enumerate(tr.skill_names)}
     _print_table("Fig 6.8: classifier confusion (diagonal)", rows, ["policy P(correct)", "data P(correct)"])
-    _append_report(out, "Fig 6.8 — classifier confusion diagonal", _markdown_table(rows, ["policy P(correct)", "data P(correct)"]) + "\n\n![confusion](confusion.png)",
-                   "rows: commanded skill (policy) or clip label (data); " "entries: mean softmax probability; rows sum to 1")
+    _append_report(
+        out,
+        "Fig 6.8 — classifier confusion diagonal",
+        _markdown_table(rows, ["policy P(correct)", "data P(correct)"]) + "\n\n![confusion](confusion.png)",
+        "rows: commanded skill (policy) or clip label (data); entries: mean softmax probability; rows sum to 1",
+    )
     return result
 
 
 @torch.no_grad()
-def eval_switch(tr: TrainedRun, a: str, b: str, trials: int, out: Path, before_s: float = 1.0, after_s: float = 2.0) -> dict:
+def eval_switch(
+    tr: TrainedRun, a: str, b: str, trials: int, out: Path, before_s: float = 1.0, after_s: float = 2.0
+) -> dict:
     """Fig 6.10/6.11: command A -> B mid-episode with and without the ramp; latency and falls."""
     if not tr.agent.conditional:
         raise CharctlError(f"{tr.run_dir} is an AMP run: it takes no command, so --switch does not apply")
@@ -241,7 +279,14 @@ def eval_switch(tr: TrainedRun, a: str, b: str, trials: int, out: Path, before_s
             p = F.softmax(logits, -1)
             from charctl.experiments.cgail.discriminator import blended_class_reward, style_reward
 
-            r_c = blended_class_reward(p, torch.from_numpy(cmd_a), torch.from_numpy(cmd_b), torch.from_numpy(w).float(), len(tr.skill_names), tr.cfg.reward.class_form)
+            r_c = blended_class_reward(
+                p,
+                torch.from_numpy(cmd_a),
+                torch.from_numpy(cmd_b),
+                torch.from_numpy(w).float(),
+                len(tr.skill_names),
+                tr.cfg.reward.class_form,
+            )
             probs.append(p.numpy())
             rs.append(style_reward(d, tr.agent.cfg.disc.objective).numpy())
             rc.append(r_c.numpy())
@@ -256,21 +301,48 @@ def eval_switch(tr: TrainedRun, a: str, b: str, trials: int, out: Path, before_s
             latency.append(int(np.argmax(hit)) if hit.any() else None)
         lat_ok = [x for x in latency if x is not None]
         falls = int((~alive).sum())
-        summary[name] = {"ramp_frames": ramp, "alive_at_switch": int(alive_at_switch.sum()), "latency_frames_mean": float(np.mean(lat_ok)) if lat_ok else None,
-                         "latency_frames": latency, "never_switched": int(sum(x is None for x in latency)), "falls": falls, "trials": trials}
+        summary[name] = {
+            "ramp_frames": ramp,
+            "alive_at_switch": int(alive_at_switch.sum()),
+            "latency_frames_mean": float(np.mean(lat_ok)) if lat_ok else None,
+            "latency_frames": latency,
+            "never_switched": int(sum(x is None for x in latency)),
+            "falls": falls,
+            "trials": trials,
+        }
         with np.errstate(all="ignore"), warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)
             mean = lambda x: np.nanmean(np.where(live[..., None] if x.ndim == 3 else live, x, np.nan), axis=1)  # noqa: E731, B023 (used in this iteration)
             curves[name] = {"probs": mean(probs), "r_style": mean(rs), "r_class": mean(rc)}
     _plot_switch(curves, tr.skill_names, ka, kb, t_switch, hz, out / f"switch_{a}_to_{b}.png")
-    result = {"from": a, "to": b, "switch_frame": t_switch, "summary": summary, "run": str(tr.run_dir),
-              "curves": {n: {k: v.tolist() for k, v in c.items()} for n, c in curves.items()}}
+    result = {
+        "from": a,
+        "to": b,
+        "switch_frame": t_switch,
+        "summary": summary,
+        "run": str(tr.run_dir),
+        "curves": {n: {k: v.tolist() for k, v in c.items()} for n, c in curves.items()},
+    }
     _write_json(out / f"switch_{a}_to_{b}.json", result)
-    rows = {n: {"latency (frames, P(B)>0.5)": s["latency_frames_mean"], "never switched": s["never_switched"], "falls": s["falls"], "alive at switch": s["alive_at_switch"], "trials": s["trials"]} for n, s in summary.items()}
+    rows = {
+        n: {
+            "latency (frames, P(B)>0.5)": s["latency_frames_mean"],
+            "never switched": s["never_switched"],
+            "falls": s["falls"],
+            "alive at switch": s["alive_at_switch"],
+            "trials": s["trials"],
+        }
+        for n, s in summary.items()
+    }
     cols = ["latency (frames, P(B)>0.5)", "never switched", "falls", "alive at switch", "trials"]
     _print_table(f"Fig 6.10/6.11: switch {a} -> {b}", rows, cols)
-    _append_report(out, f"Fig 6.10/6.11 — command switch {a} → {b}", _markdown_table(rows, cols) + f"\n\n![switch](switch_{a}_to_{b}.png)",
-                   f"switch at frame {t_switch} ({before_s:.1f} s); ramp = {ramp_frames} frames linear " f"(eq 4.10); latency = frames after the switch until the classifier's P({b}) > 0.5")
+    _append_report(
+        out,
+        f"Fig 6.10/6.11 — command switch {a} → {b}",
+        _markdown_table(rows, cols) + f"\n\n![switch](switch_{a}_to_{b}.png)",
+        f"switch at frame {t_switch} ({before_s:.1f} s); ramp = {ramp_frames} frames linear "
+        f"(eq 4.10); latency = frames after the switch until the classifier's P({b}) > 0.5",
+    )
     return result
 
 
@@ -311,10 +383,16 @@ def eval_curves(run_dirs: list[Path], out: Path) -> dict:
         runs.append((f"{kind} ({n_sk} skills) {Path(d).name}", cfg, read_scalars(Path(d) / "tb")))
     figs = {
         "curves_reward.png": ("Fig 6.3: mean reward", ["train/reward"]),
-        "curves_disc_accuracy.png": ("Fig 6.4: discriminator accuracy (data / policy)", ["train/disc_acc_data", "train/disc_acc_policy"]),
+        "curves_disc_accuracy.png": (
+            "Fig 6.4: discriminator accuracy (data / policy)",
+            ["train/disc_acc_data", "train/disc_acc_policy"],
+        ),
         "curves_style_loss.png": ("Fig 6.5: style loss", ["losses/disc_style"]),
         "curves_class_loss.png": ("Fig 6.6/6.7: class loss (CE vs LS)", ["losses/disc_class"]),
-        "curves_class_accuracy.png": ("Fig 6.9: classifier accuracy on data vs policy", ["train/class_acc_data", "train/class_acc_policy"]),
+        "curves_class_accuracy.png": (
+            "Fig 6.9: classifier accuracy on data vs policy",
+            ["train/class_acc_data", "train/class_acc_policy"],
+        ),
         "curves_episode_length.png": ("episode length (control steps)", ["train/episode_length"]),
     }
     written = []
@@ -333,7 +411,9 @@ def eval_curves(run_dirs: list[Path], out: Path) -> dict:
             ax.legend(fontsize=7)
         save_figure(fig, out / fname)
         written.append(fname)
-    _append_report(out, "Training curves", "\n".join(f"![{f}]({f})" for f in written), "runs: " + ", ".join(r[0] for r in runs))
+    _append_report(
+        out, "Training curves", "\n".join(f"![{f}]({f})" for f in written), "runs: " + ", ".join(r[0] for r in runs)
+    )
     print(f"wrote {len(written)} figures to {out}")
     return {"figures": written}
 
@@ -350,7 +430,15 @@ def evaluate(targets: list[str], options: dict, overrides: list[str]) -> None:
     run_dirs = resolve_run_dirs(targets, overrides, "eval")
     out = Path(options.get("out") or run_dirs[0] / "eval")
     out.mkdir(parents=True, exist_ok=True)
-    _append_report(out, None, None, None, command="charctl eval " + " ".join(shlex.quote(a) for a in sys.argv[2:]) if sys.argv and sys.argv[0].endswith("charctl") else None)
+    _append_report(
+        out,
+        None,
+        None,
+        None,
+        command="charctl eval " + " ".join(shlex.quote(a) for a in sys.argv[2:])
+        if sys.argv and sys.argv[0].endswith("charctl")
+        else None,
+    )
     episodes = int(options.get("episodes") or 4)
     if options.get("curves"):
         eval_curves(run_dirs, out)
@@ -419,7 +507,9 @@ def _write_json(path: Path, obj) -> None:
     atomic_write_text(path, json.dumps(_jsonable(obj), indent=2))
 
 
-def _append_report(out: Path, title: str | None, body: str | None, note: str | None, command: str | None = None) -> None:
+def _append_report(
+    out: Path, title: str | None, body: str | None, note: str | None, command: str | None = None
+) -> None:
     path = out / "report.md"
     if not path.exists():
         path.write_text("# cgail evaluation report\n\nPaper values: Table 6.1 (docs/cgail.md). Produced by charctl.\n")

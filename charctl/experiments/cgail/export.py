@@ -49,8 +49,15 @@ def export_onnx(tr: TrainedRun, path: Path) -> Path:
     model = ExportedPolicy(tr).eval()
     state, cmd = _example_inputs(tr)
     path.parent.mkdir(parents=True, exist_ok=True)
-    torch.onnx.export(model, (state, cmd), str(path), input_names=["state", "command"], output_names=["action"],
-                      dynamic_axes={"state": {0: "batch"}, "command": {0: "batch"}, "action": {0: "batch"}}, dynamo=False)
+    torch.onnx.export(
+        model,
+        (state, cmd),
+        str(path),
+        input_names=["state", "command"],
+        output_names=["action"],
+        dynamic_axes={"state": {0: "batch"}, "command": {0: "batch"}, "action": {0: "batch"}},
+        dynamo=False,
+    )
     return path
 
 
@@ -62,7 +69,7 @@ def export_torchscript(tr: TrainedRun, path: Path) -> Path:
 
 
 def parse_schedule(text: str, names: list[str]) -> list[tuple[float, int]]:
-    """"walk:0,run:3" -> [(0.0, k_walk), (3.0, k_run)], sorted by time; one-line errors."""
+    """ "walk:0,run:3" -> [(0.0, k_walk), (3.0, k_run)], sorted by time; one-line errors."""
     out = []
     for item in text.split(","):
         if ":" not in item:

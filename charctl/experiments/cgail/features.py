@@ -69,7 +69,16 @@ def policy_state(k: Kinematics) -> np.ndarray:
     ang = R.rotate(h_b, k.ang_vel)
     com = R.rotate(hinv, k.com - root)
     com_v = R.rotate(hinv, k.com_vel)
-    parts = [root[:, 1:2], rel[:, 1:].reshape(N, -1), rot.reshape(N, -1), lin.reshape(N, -1), ang.reshape(N, -1), com, com_v, rel[:, ee].reshape(N, -1)]
+    parts = [
+        root[:, 1:2],
+        rel[:, 1:].reshape(N, -1),
+        rot.reshape(N, -1),
+        lin.reshape(N, -1),
+        ang.reshape(N, -1),
+        com,
+        com_v,
+        rel[:, ee].reshape(N, -1),
+    ]
     return np.concatenate(parts, axis=1)
 
 
@@ -86,7 +95,14 @@ def disc_obs(k: Kinematics) -> np.ndarray:
     parents = skel.parents[joints]
     local = R.multiply(R.conjugate(k.body_rot[:, parents]), k.body_rot[:, joints])
     rel = R.rotate(h_b, k.body_pos - root[:, None])
-    parts = [root[:, 1:2], lin[:, 0], ang_root, _rot6(local).reshape(N, -1), lin[:, 1:].reshape(N, -1), rel[:, ee].reshape(N, -1)]
+    parts = [
+        root[:, 1:2],
+        lin[:, 0],
+        ang_root,
+        _rot6(local).reshape(N, -1),
+        lin[:, 1:].reshape(N, -1),
+        rel[:, ee].reshape(N, -1),
+    ]
     return np.concatenate(parts, axis=1)
 
 
@@ -95,7 +111,14 @@ def clip_kinematics(clip) -> Kinematics:
     from charctl.motion.clip import finite_difference
 
     com = clip.com()
-    return Kinematics(clip.body_pos, clip.body_rot, clip.body_linear_velocity(), clip.world_angular_velocity(), com, finite_difference(com, clip.dt))
+    return Kinematics(
+        clip.body_pos,
+        clip.body_rot,
+        clip.body_linear_velocity(),
+        clip.world_angular_velocity(),
+        com,
+        finite_difference(com, clip.dt),
+    )
 
 
 def sim_kinematics(sim) -> Kinematics:

@@ -35,15 +35,22 @@ class TrainedRun:
 
     def skill_index(self, name: str) -> int:
         if name not in self.skill_names:
-            raise CharctlError(f"unknown skill {name!r} for {self.run_dir}; its skills are {', '.join(self.skill_names)}")
+            raise CharctlError(
+                f"unknown skill {name!r} for {self.run_dir}; its skills are {', '.join(self.skill_names)}"
+            )
         return self.skill_names.index(name)
 
     def make_env(self, num_envs: int, seed: int = 0, **env_overrides) -> CgailEnv:
         from omegaconf import OmegaConf
 
         env_cfg = OmegaConf.merge(self.cfg.env, {"num_envs": num_envs, **env_overrides})
-        return CgailEnv(self.agent.skills, env_cfg, seed=seed, conditional=self.agent.conditional,
-                        tracking=self.cfg.reward.kind == "tracking")
+        return CgailEnv(
+            self.agent.skills,
+            env_cfg,
+            seed=seed,
+            conditional=self.agent.conditional,
+            tracking=self.cfg.reward.kind == "tracking",
+        )
 
     @torch.no_grad()
     def mean_action(self, env: CgailEnv) -> np.ndarray:

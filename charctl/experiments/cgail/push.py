@@ -27,7 +27,9 @@ from charctl.motion import rotations as R
 def make_push_simulator(run_dir, skill: str = "walk"):
     tr = load_trained_run(run_dir)
     if skill not in tr.skill_names:
-        raise CharctlError(f"{run_dir} has no {skill!r} skill (skills: {', '.join(tr.skill_names)}); train one with use_skills=[walk]")
+        raise CharctlError(
+            f"{run_dir} has no {skill!r} skill (skills: {', '.join(tr.skill_names)}); train one with use_skills=[walk]"
+        )
     k = tr.skill_index(skill)
 
     def simulate(case, seed: int) -> bool:

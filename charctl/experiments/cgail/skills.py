@@ -39,11 +39,23 @@ def load_skills(skills, control_hz: float, oversample: int = 1) -> list[SkillDat
         qpos, qvel = clip_to_qpos_qvel(clip)
         obs = disc_obs(clip_kinematics(clip))
         planar = np.linalg.norm(np.diff(clip.root_pos[:, [0, 2]], axis=0), axis=1).sum()
-        fine = disc_obs(clip_kinematics(load_clip(s.clip).resample(control_hz * oversample))) if oversample > 1 else None
+        fine = (
+            disc_obs(clip_kinematics(load_clip(s.clip).resample(control_hz * oversample))) if oversample > 1 else None
+        )
         out.append(
             SkillData(
-                s.name, s.clip, bool(s.heading_goal), qpos, qvel, obs, clip.loop,
-                float(planar / max(clip.duration, 1e-9)), clip.local_rot, clip.fps, fine, oversample,
+                s.name,
+                s.clip,
+                bool(s.heading_goal),
+                qpos,
+                qvel,
+                obs,
+                clip.loop,
+                float(planar / max(clip.duration, 1e-9)),
+                clip.local_rot,
+                clip.fps,
+                fine,
+                oversample,
             )
         )
     return out

@@ -15,10 +15,16 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-from charctl.errors import CharctlError
 from charctl.experiments.cgail.discriminator import (
-    Discriminator, ReplayBuffer, blended_class_reward, class_loss, gradient_penalty, logit_regulariser, style_loss,
-    style_reward, weight_decay_term,
+    Discriminator,
+    ReplayBuffer,
+    blended_class_reward,
+    class_loss,
+    gradient_penalty,
+    logit_regulariser,
+    style_loss,
+    style_reward,
+    weight_decay_term,
 )
 from charctl.experiments.cgail.env import CgailEnv
 from charctl.experiments.cgail.skills import DemoPairs, load_skills, select_skills
@@ -55,9 +61,13 @@ class Agent:
         return len(self.skills)
 
     def signature(self) -> dict:
-        return {"skills": ",".join(s.name for s in self.skills), "conditional": self.conditional,
-                "reward": str(self.cfg.reward.kind),
-                "policy_hidden": list(self.cfg.ppo.hidden), "disc_hidden": list(self.cfg.disc.hidden)}
+        return {
+            "skills": ",".join(s.name for s in self.skills),
+            "conditional": self.conditional,
+            "reward": str(self.cfg.reward.kind),
+            "policy_hidden": list(self.cfg.ppo.hidden),
+            "disc_hidden": list(self.cfg.disc.hidden),
+        }
 
 
 def build_agent(cfg, device: str = "cpu") -> Agent:
@@ -103,10 +113,17 @@ def discriminator_param_groups(disc: Discriminator, dcfg) -> list[dict]:
 
 def agent_state(agent: Agent, env: CgailEnv | None = None) -> dict:
     state = {
-        "ppo": agent.ppo.state_dict(), "disc": agent.disc.state_dict(), "disc_opt": agent.disc_opt.state_dict(),
-        "replay": agent.replay.state_dict(), "iteration": agent.iteration, "samples": agent.samples,
-        "unstable_total": agent.unstable_total, "torch_rng": torch.get_rng_state(), "gen_rng": agent.generator.get_state(),
-        "skills": [s.name for s in agent.skills], "clips": [s.clip_name for s in agent.skills],
+        "ppo": agent.ppo.state_dict(),
+        "disc": agent.disc.state_dict(),
+        "disc_opt": agent.disc_opt.state_dict(),
+        "replay": agent.replay.state_dict(),
+        "iteration": agent.iteration,
+        "samples": agent.samples,
+        "unstable_total": agent.unstable_total,
+        "torch_rng": torch.get_rng_state(),
+        "gen_rng": agent.generator.get_state(),
+        "skills": [s.name for s in agent.skills],
+        "clips": [s.clip_name for s in agent.skills],
     }
     if env is not None and getattr(env, "on_device", False):
         state["env_torch_rng"] = env.generator.get_state()  # device env (env.backend=warp): torch generator
@@ -186,7 +203,12 @@ def _collect_rollout(agent: Agent, env: CgailEnv, steps: int, deterministic: boo
         cond = blend if agent.conditional else None
         action, logp, value = agent.model.act(obs, cond, deterministic=deterministic)
         o_t = env.obs.copy()
-        cmd_a[t], cmd_b[t], w[t], cond_all[t] = torch.from_numpy(env.prev_cmd), torch.from_numpy(env.cmd), torch.from_numpy(env.w), blend
+        cmd_a[t], cmd_b[t], w[t], cond_all[t] = (
+            torch.from_numpy(env.prev_cmd),
+            torch.from_numpy(env.cmd),
+            torch.from_numpy(env.w),
+            blend,
+        )
         steps_before = env.steps.copy()
         res = env.step(action.cpu().numpy().astype(np.float64))
         pairs[t] = torch.from_numpy(np.concatenate([o_t, res.pair_next], axis=1))
@@ -199,8 +221,15 @@ def _collect_rollout(agent: Agent, env: CgailEnv, steps: int, deterministic: boo
             with torch.no_grad():
                 v_final = agent.model.value(fs, blend[idx] if agent.conditional else None)
             bootstrap[t, torch.as_tensor(idx, device=dev)] = agent.cfg.ppo.gamma * v_final
-        storage.add(obs, blend if agent.conditional else None, action, logp, value, torch.zeros(N, device=dev),
-                    torch.from_numpy(done).to(dev))
+        storage.add(
+            obs,
+            blend if agent.conditional else None,
+            action,
+            logp,
+            value,
+            torch.zeros(N, device=dev),
+            torch.from_numpy(done).to(dev),
+        )
         lengths += list(steps_before[done] + 1)
         unstable += int(res.unstable.sum())
         falls += int((res.terminated & ~res.unstable).sum())
@@ -253,8 +282,9 @@ def _collect_rollout_device(agent: Agent, env, steps: int, deterministic: bool) 
             v_final = agent.model.value(final_states[truncated], cond_all[truncated] if agent.conditional else None)
         bootstrap[truncated] = agent.cfg.ppo.gamma * v_final
     lengths = ep_len[ended].tolist()
-    return Rollout(storage, pairs, cond_all, cmd_a, cmd_b, w, r_goal, r_track, bootstrap, lengths, int(unstable),
-                   int(falls))
+    return Rollout(
+        storage, pairs, cond_all, cmd_a, cmd_b, w, r_goal, r_track, bootstrap, lengths, int(unstable), int(falls)
+    )
 
 
 @torch.no_grad()
@@ -267,13 +297,19 @@ def discriminator_rewards(agent: Agent, ro: Rollout) -> dict[str, torch.Tensor]:
         probs = F.softmax(logits, dim=-1)
         out["probs"] = probs.reshape(T, N, -1)
         out["r_class"] = blended_class_reward(
-            probs, ro.cmd_a.reshape(-1), ro.cmd_b.reshape(-1), ro.w.reshape(-1), agent.num_skills,
+            probs,
+            ro.cmd_a.reshape(-1),
+            ro.cmd_b.reshape(-1),
+            ro.w.reshape(-1),
+            agent.num_skills,
             agent.cfg.reward.class_form,
         ).reshape(T, N)
     return out
 
 
-def total_reward(agent: Agent, rewards: dict, r_goal: torch.Tensor, r_track: torch.Tensor | None = None) -> torch.Tensor:
+def total_reward(
+    agent: Agent, rewards: dict, r_goal: torch.Tensor, r_track: torch.Tensor | None = None
+) -> torch.Tensor:
     """r = w_S r_S + w_C r_C + w_G r_G (eq 4.1); AMP baseline: no r_C; tracking baseline:
     r = r_track + w_G r_G (the discriminator still trains, as a style diagnostic only)."""
     rc = agent.cfg.reward
@@ -325,8 +361,13 @@ def update_discriminator(agent: Agent, ro: Rollout, rng: np.random.Generator) ->
         loss.backward()
         agent.disc_opt.step()
         with torch.no_grad():
-            step_stats = {"losses/disc_style": float(l_style), "losses/disc_gp": float(l_gp), "losses/disc_class": float(l_cls),
-                          "train/disc_acc_data": float((d_data > 0).float().mean()), "train/disc_acc_policy": float((d_pol < 0).float().mean())}
+            step_stats = {
+                "losses/disc_style": float(l_style),
+                "losses/disc_gp": float(l_gp),
+                "losses/disc_class": float(l_cls),
+                "train/disc_acc_data": float((d_data > 0).float().mean()),
+                "train/disc_acc_policy": float((d_pol < 0).float().mean()),
+            }
             if agent.conditional:
                 hit = (c_data.argmax(-1) == labels).float()
                 step_stats["train/class_acc_data"] = float(hit.mean())
@@ -377,11 +418,22 @@ class CgailLearner:
         if self.backend == "warp":  # MuJoCo Warp on the same device: rollout never leaves it
             from charctl.experiments.cgail.env_torch import CgailDeviceEnv
 
-            self.env = CgailDeviceEnv(self.agent.skills, cfg.env, seed=cfg.seed, conditional=self.agent.conditional,
-                                      tracking=cfg.reward.kind == "tracking", device=self.device)
+            self.env = CgailDeviceEnv(
+                self.agent.skills,
+                cfg.env,
+                seed=cfg.seed,
+                conditional=self.agent.conditional,
+                tracking=cfg.reward.kind == "tracking",
+                device=self.device,
+            )
         else:
-            self.env = CgailEnv(self.agent.skills, cfg.env, seed=cfg.seed, conditional=self.agent.conditional,
-                                tracking=cfg.reward.kind == "tracking")
+            self.env = CgailEnv(
+                self.agent.skills,
+                cfg.env,
+                seed=cfg.seed,
+                conditional=self.agent.conditional,
+                tracking=cfg.reward.kind == "tracking",
+            )
         self.samples_per_iteration = cfg.train.rollout_steps * self.env.N
         self.episode_lengths: list = []
         self.rng = np.random.default_rng(cfg.seed + 7919)
@@ -442,15 +494,23 @@ class CgailLearner:
         n = self.samples_per_iteration
         mean_len = float(np.mean(self.episode_lengths)) if self.episode_lengths else float(cfg.train.rollout_steps)
         stats = {
-            **ppo_stats, **disc_stats,
-            "train/r_style": float(rew["r_style"].mean()), "train/r_goal": float(ro.r_goal.mean()),
+            **ppo_stats,
+            **disc_stats,
+            "train/r_style": float(rew["r_style"].mean()),
+            "train/r_goal": float(ro.r_goal.mean()),
             "train/r_track": float(ro.r_track.mean()),
-            "train/reward": float(reward.mean()), "train/episode_length": mean_len,
-            "train/unstable_resets_total": float(agent.unstable_total), "train/falls": float(ro.falls),
-            "train/unstable_rate": float(ro.unstable) / n, "sim/unstable_resets": float(ro.unstable),
-            "perf/samples_per_s": n / (t4 - t0), "perf/rollout_samples_per_s": n / (t1 - t0),
-            "perf/frac_rollout": (t1 - t0) / (t4 - t0), "perf/frac_reward": (t2 - t1) / (t4 - t0),
-            "perf/frac_ppo": (t3 - t2) / (t4 - t0), "perf/frac_disc": (t4 - t3) / (t4 - t0),
+            "train/reward": float(reward.mean()),
+            "train/episode_length": mean_len,
+            "train/unstable_resets_total": float(agent.unstable_total),
+            "train/falls": float(ro.falls),
+            "train/unstable_rate": float(ro.unstable) / n,
+            "sim/unstable_resets": float(ro.unstable),
+            "perf/samples_per_s": n / (t4 - t0),
+            "perf/rollout_samples_per_s": n / (t1 - t0),
+            "perf/frac_rollout": (t1 - t0) / (t4 - t0),
+            "perf/frac_reward": (t2 - t1) / (t4 - t0),
+            "perf/frac_ppo": (t3 - t2) / (t4 - t0),
+            "perf/frac_disc": (t4 - t3) / (t4 - t0),
         }
         if agent.conditional:
             stats["train/r_class"] = float(rew["r_class"].mean())
@@ -483,7 +543,9 @@ def train(cfg, run) -> dict:
     if cfg.reward.kind == "tracking":
         kind = f"tracking, {kind}"
     settings = RunnerSettings(
-        total_samples=int(cfg.train.total_samples), checkpoint_every=int(cfg.train.checkpoint_every),
-        log_every=int(cfg.train.log_every), description=f"cgail ({kind}, {learner.agent.num_skills} skills)",
+        total_samples=int(cfg.train.total_samples),
+        checkpoint_every=int(cfg.train.checkpoint_every),
+        log_every=int(cfg.train.log_every),
+        description=f"cgail ({kind}, {learner.agent.num_skills} skills)",
     )
     return run_on_policy(learner, run, settings)

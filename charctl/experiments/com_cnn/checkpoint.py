@@ -25,8 +25,15 @@ class LoadedRun:
     def label(self) -> str:
         m, d = self.cfg.model, self.cfg.data
         kind = "CNN, history + COM" if m.use_com else "CNN, history only"
-        extra = "".join(f", {k}={v}" for k, v in (("fc", m.fc_activation), ("opt", self.cfg.train.optimizer)) if v not in ("none", "sgd"))
-        return f"{kind} (i={d.history}, w={m.kernel}, " f"ch={'/'.join(str(c) for c in m.channels)}, {d.frame}{extra}){self.suffix}"
+        extra = "".join(
+            f", {k}={v}"
+            for k, v in (("fc", m.fc_activation), ("opt", self.cfg.train.optimizer))
+            if v not in ("none", "sgd")
+        )
+        return (
+            f"{kind} (i={d.history}, w={m.kernel}, "
+            f"ch={'/'.join(str(c) for c in m.channels)}, {d.frame}{extra}){self.suffix}"
+        )
 
     def predictor(self) -> CnnPredictor:
         return CnnPredictor(self.label, self.model, int(self.cfg.data.history), str(self.cfg.data.frame))

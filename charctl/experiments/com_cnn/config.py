@@ -11,24 +11,61 @@ from charctl.config import BaseConfig
 
 # Table 1 of the paper: mass per body part (total 62). Units are the paper's (only ratios matter).
 PAPER_MASS_TABLE = {
-    "Hips": 10.0, "Spine": 20.0, "Head": 5.0,
-    "LeftArm": 2.0, "LeftForeArm": 1.5, "LeftHand": 0.5,
-    "RightArm": 2.0, "RightForeArm": 1.5, "RightHand": 0.5,
-    "LeftUpLeg": 5.0, "LeftLeg": 4.0, "LeftFoot": 0.5,
-    "RightUpLeg": 5.0, "RightLeg": 4.0, "RightFoot": 0.5,
+    "Hips": 10.0,
+    "Spine": 20.0,
+    "Head": 5.0,
+    "LeftArm": 2.0,
+    "LeftForeArm": 1.5,
+    "LeftHand": 0.5,
+    "RightArm": 2.0,
+    "RightForeArm": 1.5,
+    "RightHand": 0.5,
+    "LeftUpLeg": 5.0,
+    "LeftLeg": 4.0,
+    "LeftFoot": 0.5,
+    "RightUpLeg": 5.0,
+    "RightLeg": 4.0,
+    "RightFoot": 0.5,
 }
 # Paper body part -> DeepMimic humanoid body (one to one: both skeletons have 15 parts).
 HUMANOID_BODIES = {
-    "Hips": "root", "Spine": "chest", "Head": "neck",
-    "LeftArm": "left_shoulder", "LeftForeArm": "left_elbow", "LeftHand": "left_wrist",
-    "RightArm": "right_shoulder", "RightForeArm": "right_elbow", "RightHand": "right_wrist",
-    "LeftUpLeg": "left_hip", "LeftLeg": "left_knee", "LeftFoot": "left_ankle",
-    "RightUpLeg": "right_hip", "RightLeg": "right_knee", "RightFoot": "right_ankle",
+    "Hips": "root",
+    "Spine": "chest",
+    "Head": "neck",
+    "LeftArm": "left_shoulder",
+    "LeftForeArm": "left_elbow",
+    "LeftHand": "left_wrist",
+    "RightArm": "right_shoulder",
+    "RightForeArm": "right_elbow",
+    "RightHand": "right_wrist",
+    "LeftUpLeg": "left_hip",
+    "LeftLeg": "left_knee",
+    "LeftFoot": "left_ankle",
+    "RightUpLeg": "right_hip",
+    "RightLeg": "right_knee",
+    "RightFoot": "right_ankle",
 }
 ALL_CLIPS = [
-    "backflip", "cartwheel", "crawl", "dance_a", "dance_b", "getup_facedown", "getup_faceup", "jump",
-    "kick", "punch", "roll", "run", "spin", "spinkick", "walk",
-    "walker/turn_left0", "walker/turn_left1", "walker/turn_right0", "walker/turn_right1", "walker/walk_forward",
+    "backflip",
+    "cartwheel",
+    "crawl",
+    "dance_a",
+    "dance_b",
+    "getup_facedown",
+    "getup_faceup",
+    "jump",
+    "kick",
+    "punch",
+    "roll",
+    "run",
+    "spin",
+    "spinkick",
+    "walk",
+    "walker/turn_left0",
+    "walker/turn_left1",
+    "walker/turn_right0",
+    "walker/turn_right1",
+    "walker/walk_forward",
 ]
 
 
@@ -58,7 +95,9 @@ class DataConfig:
     loop_min_seconds: float = 6.0  # looping clips are repeated to at least this long (paper silent; ours)
     loop_blend_frames: int = 6  # frames over which the pose jump at a loop seam is spread (ours)
     bvh_scale: float = 1.0  # BVH positions x this = metres (0.01 for centimetre files)
-    bvh_forward: list[float] = field(default_factory=lambda: [0.0, 0.0, 1.0])  # root-local forward axis of BVH skeletons
+    bvh_forward: list[float] = field(
+        default_factory=lambda: [0.0, 0.0, 1.0]
+    )  # root-local forward axis of BVH skeletons
     window_cache_mb: int = 512  # precompute all training windows when they fit in this many MB (else per batch)
 
 
@@ -66,12 +105,16 @@ class DataConfig:
 class ComConfig:
     mass_table: dict[str, float] = field(default_factory=lambda: dict(PAPER_MASS_TABLE))  # paper Table 1
     humanoid_bodies: dict[str, str] = field(default_factory=lambda: dict(HUMANOID_BODIES))  # part -> humanoid body
-    bvh_joints: dict[str, str] = field(default_factory=lambda: {k: k for k in PAPER_MASS_TABLE})  # part -> BVH joint name
+    bvh_joints: dict[str, str] = field(
+        default_factory=lambda: {k: k for k in PAPER_MASS_TABLE}
+    )  # part -> BVH joint name
 
 
 @dataclass
 class ModelConfig:
-    channels: list[int] = field(default_factory=lambda: [32, 64, 128])  # filters per conv layer (paper Table 2); length = layers
+    channels: list[int] = field(
+        default_factory=lambda: [32, 64, 128]
+    )  # filters per conv layer (paper Table 2); length = layers
     kernel: int = 10  # temporal kernel width w (paper Table 2)
     pool: int = 2  # max-pooling width after every conv+ReLU (Table 2's 81->40, 31->15, 6->3)
     fc_hidden: int = 512  # width of the first FC layer of P (paper silent; ours)
@@ -96,8 +139,12 @@ class TrainConfig:
 @dataclass
 class EvalConfig:
     # paper motion types -> DeepMimic class labels; labels not listed fall into "other"
-    motion_types: dict[str, list[str]] = field(default_factory=lambda: {"walk": ["walk", "turn"], "crouch_walk": ["crawl"]})
-    paper_table5: dict[str, float] = field(default_factory=lambda: {"walk": 0.415, "crouch_walk": 0.614, "other": 1.567})
+    motion_types: dict[str, list[str]] = field(
+        default_factory=lambda: {"walk": ["walk", "turn"], "crouch_walk": ["crawl"]}
+    )
+    paper_table5: dict[str, float] = field(
+        default_factory=lambda: {"walk": 0.415, "crouch_walk": 0.614, "other": 1.567}
+    )
     horizon_s: float = 3.0  # autoregressive rollouts: longest horizon on the error curve
     ar_stride: int = 10  # frames between rollout starts within a held-out clip
     nn_pca_dims: int = 64  # nearest-neighbour baseline: history compressed to this many PCA dims (ours)
@@ -140,8 +187,10 @@ class Config(BaseConfig):
         if cfg.data.history < 1 or not cfg.model.channels or cfg.model.kernel < 1 or cfg.model.pool < 1:
             return "data.history, model.kernel, model.pool must be >= 1 and model.channels non-empty"
         if conv_output_length(cfg.data.history, cfg.model.kernel, cfg.model.pool, len(cfg.model.channels)) < 1:
-            return (f"history {cfg.data.history} is too short for {len(cfg.model.channels)} conv layers of kernel "
-                    f"{cfg.model.kernel} with pooling {cfg.model.pool}")
+            return (
+                f"history {cfg.data.history} is too short for {len(cfg.model.channels)} conv layers of kernel "
+                f"{cfg.model.kernel} with pooling {cfg.model.pool}"
+            )
         if cfg.data.fps <= 0 or cfg.train.steps < 1 or cfg.train.batch_size < 1:
             return "data.fps, train.steps and train.batch_size must be positive"
         if cfg.generate.max_com_step <= 0:

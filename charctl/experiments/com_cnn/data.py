@@ -74,8 +74,12 @@ def humanoid_body(com_cfg) -> BodyModel:
     masses = map_masses(com_cfg.mass_table, com_cfg.humanoid_bodies, skel.names, "com.humanoid_bodies")
     joints = skel.names[1:]
     return BodyModel(
-        kind="humanoid", skeleton=skel, masses=masses, forward=np.array([1.0, 0.0, 0.0]),
-        hinge=np.array([n in HINGE_JOINTS for n in joints]), fixed=np.array([n not in CLIP_JOINTS for n in joints]),
+        kind="humanoid",
+        skeleton=skel,
+        masses=masses,
+        forward=np.array([1.0, 0.0, 0.0]),
+        hinge=np.array([n in HINGE_JOINTS for n in joints]),
+        fixed=np.array([n not in CLIP_JOINTS for n in joints]),
     )
 
 
@@ -89,7 +93,10 @@ def map_masses(table: dict, part_to_body: dict, names, key: str) -> np.ndarray:
             masses[list(names).index(body)] += float(m)
             hits += 1
     if hits == 0 or masses.sum() <= 0:
-        raise CharctlError(f"no body of the skeleton matches the mass table (parts {', '.join(list(table)[:4])}, " f"...; bodies {', '.join(list(names)[:4])}, ...); map them with {key}")
+        raise CharctlError(
+            f"no body of the skeleton matches the mass table (parts {', '.join(list(table)[:4])}, "
+            f"...; bodies {', '.join(list(names)[:4])}, ...); map them with {key}"
+        )
     return masses
 
 
@@ -165,7 +172,9 @@ def _blend_seam(p, r, j, p_next, r_next, j_next, blend: int) -> None:
     r[-k:] = R.normalize(R.multiply(r[-k:], R.slerp(ident, np.broadcast_to(d_root, (k, 4)), w)))
     J = j.shape[1]
     jw = np.broadcast_to(w[:, None], (k, J))
-    j[-k:] = R.normalize(R.multiply(j[-k:], R.slerp(np.broadcast_to(R.IDENTITY, (k, J, 4)), np.broadcast_to(d_joint, (k, J, 4)), jw)))
+    j[-k:] = R.normalize(
+        R.multiply(j[-k:], R.slerp(np.broadcast_to(R.IDENTITY, (k, J, 4)), np.broadcast_to(d_joint, (k, J, 4)), jw))
+    )
     p[-k:, 1] += w * (p_next[1] - p[-1, 1])
 
 
@@ -175,7 +184,9 @@ def make_sequence(name, base, label, fps, root_pos, root_rot, joint_rot, loop, d
     T = root_pos.shape[0]
     if loop and T > 2:
         cycles = max(1, math.ceil((data_cfg.loop_min_seconds * fps) / (T - 1)))
-        root_pos, root_rot, joint_rot = tile_loop(root_pos, root_rot, joint_rot, cycles, data_cfg.loop_blend_frames, body.forward)
+        root_pos, root_rot, joint_rot = tile_loop(
+            root_pos, root_rot, joint_rot, cycles, data_cfg.loop_blend_frames, body.forward
+        )
     root_pos, root_rot = canonical_start(root_pos, root_rot, body.forward)
     seq = Sequence(name, base, label, fps, root_pos, root_rot, joint_rot, cycles=cycles)
     seq.com = body.com(root_pos, root_rot, joint_rot)
@@ -191,8 +202,20 @@ def load_deepmimic(cfg, body: BodyModel) -> list[Sequence]:
         variants = [name, name + ":mirror"] if cfg.data.mirror else [name]
         for spec in variants:
             clip = load_clip(spec).resample(cfg.data.fps)
-            out.append(make_sequence(clip.name, name, clip.label or name, clip.fps, clip.root_pos, clip.local_rot[:, 0],
-                                     clip.local_rot[:, 1:], clip.loop, cfg.data, body))
+            out.append(
+                make_sequence(
+                    clip.name,
+                    name,
+                    clip.label or name,
+                    clip.fps,
+                    clip.root_pos,
+                    clip.local_rot[:, 0],
+                    clip.local_rot[:, 1:],
+                    clip.loop,
+                    cfg.data,
+                    body,
+                )
+            )
     return out
 
 
@@ -221,16 +244,32 @@ def load_bvh_dir(cfg) -> tuple[list[Sequence], BodyModel]:
         if body is None:
             body = bvh_body(motion, path, cfg)
         elif list(motion.names) != list(body.skeleton.names):
-            raise CharctlError(f"{path}: skeleton differs from {files[0].name} (all files in data.bvh_dir must share one skeleton)")
+            raise CharctlError(
+                f"{path}: skeleton differs from {files[0].name} (all files in data.bvh_dir must share one skeleton)"
+            )
         trans, rot = motion.local_transforms()
         rel = path.relative_to(root)
         name = str(rel.with_suffix(""))
-        clip = Clip(name=name, fps=motion.fps, root_pos=trans[:, 0] * cfg.data.bvh_scale, local_rot=rot, skeleton=body.skeleton)
+        clip = Clip(
+            name=name, fps=motion.fps, root_pos=trans[:, 0] * cfg.data.bvh_scale, local_rot=rot, skeleton=body.skeleton
+        )
         if clip.num_frames < 2:
             raise CharctlError(f"{path}: needs at least 2 frames")
         clip = clip.resample(cfg.data.fps)
-        seqs.append(make_sequence(name, name, bvh_label(rel), clip.fps, clip.root_pos, clip.local_rot[:, 0],
-                                  clip.local_rot[:, 1:], False, cfg.data, body))
+        seqs.append(
+            make_sequence(
+                name,
+                name,
+                bvh_label(rel),
+                clip.fps,
+                clip.root_pos,
+                clip.local_rot[:, 0],
+                clip.local_rot[:, 1:],
+                False,
+                cfg.data,
+                body,
+            )
+        )
     return seqs, body
 
 
@@ -246,14 +285,28 @@ def bvh_body(motion, path: Path, cfg) -> BodyModel:
         elif j in motion.end_sites:
             half[j] = 0.5 * motion.end_sites[j] * s
     masses = map_masses(cfg.com.mass_table, dict(cfg.com.bvh_joints), motion.names, "com.bvh_joints")
-    skel = Skeleton(names=tuple(motion.names), parents=np.asarray(motion.parents), offsets=motion.offsets * s,
-                    masses=masses, com_local=half, source=str(path))
+    skel = Skeleton(
+        names=tuple(motion.names),
+        parents=np.asarray(motion.parents),
+        offsets=motion.offsets * s,
+        masses=masses,
+        com_local=half,
+        source=str(path),
+    )
     text = path.read_text()
     header = text[: text.index("MOTION")]
     J1 = J - 1
-    return BodyModel(kind="bvh", skeleton=skel, masses=masses, forward=np.asarray(cfg.data.bvh_forward, dtype=float),
-                     hinge=np.zeros(J1, bool), fixed=np.zeros(J1, bool), bvh_header=header,
-                     bvh_channels=tuple(tuple(c) for c in motion.channels), bvh_scale=s)
+    return BodyModel(
+        kind="bvh",
+        skeleton=skel,
+        masses=masses,
+        forward=np.asarray(cfg.data.bvh_forward, dtype=float),
+        hinge=np.zeros(J1, bool),
+        fixed=np.zeros(J1, bool),
+        bvh_header=header,
+        bvh_channels=tuple(tuple(c) for c in motion.channels),
+        bvh_scale=s,
+    )
 
 
 def load_sequences(cfg) -> tuple[list[Sequence], BodyModel]:
@@ -270,7 +323,10 @@ def split_sequences(seqs: list[Sequence], test_clips) -> tuple[list[Sequence], l
     known = {s.base for s in seqs}
     missing = sorted(test_set - known)
     if missing:
-        raise CharctlError(f"data.test_clips {missing} are not among the clips " f"({', '.join(sorted(known)[:8])}, ...); set data.test_clips=[...]")
+        raise CharctlError(
+            f"data.test_clips {missing} are not among the clips "
+            f"({', '.join(sorted(known)[:8])}, ...); set data.test_clips=[...]"
+        )
     train = [s for s in seqs if s.base not in test_set]
     test = [s for s in seqs if s.base in test_set]
     if not train:
@@ -345,9 +401,15 @@ def frame_table(seqs: list[Sequence], body: BodyModel) -> FrameTable:
     joints = np.concatenate([s.joint_rot for s in seqs])
     origin, q = heading_frame(root_pos, root_rot, body.forward)
     return FrameTable(
-        root_pos=root_pos, root_rot=root_rot, joint_exp=R.log_map(joints).reshape(len(joints), -1),
-        com=np.concatenate([s.com for s in seqs]), origin=origin, q_frame=q,
-        start=np.repeat(offsets[:-1], lens), seq_index=np.repeat(np.arange(len(seqs)), lens), offsets=offsets,
+        root_pos=root_pos,
+        root_rot=root_rot,
+        joint_exp=R.log_map(joints).reshape(len(joints), -1),
+        com=np.concatenate([s.com for s in seqs]),
+        origin=origin,
+        q_frame=q,
+        start=np.repeat(offsets[:-1], lens),
+        seq_index=np.repeat(np.arange(len(seqs)), lens),
+        offsets=offsets,
     )
 
 
@@ -404,5 +466,8 @@ def build_windows(cfg) -> tuple[WindowSet, WindowSet, BodyModel]:
     seqs, body = load_sequences(cfg)
     test_clips = cfg.data.test_clips
     train, test = split_sequences(seqs, test_clips)
-    return (WindowSet(train, body, cfg.data.history, cfg.data.frame),
-            WindowSet(test, body, cfg.data.history, cfg.data.frame), body)
+    return (
+        WindowSet(train, body, cfg.data.history, cfg.data.frame),
+        WindowSet(test, body, cfg.data.history, cfg.data.frame),
+        body,
+    )

@@ -54,7 +54,9 @@ def joint_angles_deg(joint_exp_a: np.ndarray, joint_rot_b: np.ndarray, body: Bod
     return np.degrees(R.angle_between(qa, joint_rot_b)[..., body.error_joints].mean(axis=-1))
 
 
-def teacher_forced_errors(pred: Predictor, seqs: list[Sequence], body: BodyModel, motion_types: dict, chunk: int = 512) -> dict:
+def teacher_forced_errors(
+    pred: Predictor, seqs: list[Sequence], body: BodyModel, motion_types: dict, chunk: int = 512
+) -> dict:
     """Mean joint-angle error (deg) per motion type, per clip and overall, history from the ground truth."""
     from charctl.experiments.com_cnn.train import joint_angle_error_deg
 
@@ -93,7 +95,9 @@ def seed_buffer(seq: Sequence, starts: np.ndarray, history: int) -> Buffer:
     return Buffer(seq.root_pos[idx], seq.root_rot[idx], R.log_map(seq.joint_rot[idx]).reshape(len(starts), history, -1))
 
 
-def autoregressive_errors(pred: Predictor, seqs: list[Sequence], body: BodyModel, horizon: int, stride: int, motion_types: dict) -> dict:
+def autoregressive_errors(
+    pred: Predictor, seqs: list[Sequence], body: BodyModel, horizon: int, stride: int, motion_types: dict
+) -> dict:
     """Joint-angle error (deg) and root position error (m) against the number of generated frames."""
     sums = {"all": np.zeros(horizon)}
     counts = {"all": np.zeros(horizon)}
@@ -103,8 +107,13 @@ def autoregressive_errors(pred: Predictor, seqs: list[Sequence], body: BodyModel
         H = min(horizon, T - 1)
         starts = np.arange(1, T - H + 1, stride)
         tgt = starts[:, None] + np.arange(H)[None, :]  # (B, H) ground-truth frames
-        gen = rollout(pred, body, seed_buffer(seq, starts, pred.history), seq.com[tgt],
-                      reference_for(pred, body, seq.root_pos[tgt], seq.root_rot[tgt]))
+        gen = rollout(
+            pred,
+            body,
+            seed_buffer(seq, starts, pred.history),
+            seq.com[tgt],
+            reference_for(pred, body, seq.root_pos[tgt], seq.root_rot[tgt]),
+        )
         err = joint_angles_deg(gen.joint_exp, seq.joint_rot[tgt], body)  # (B, H)
         kind = motion_type(seq.label, motion_types)
         for key in ("all", kind):
@@ -113,7 +122,11 @@ def autoregressive_errors(pred: Predictor, seqs: list[Sequence], body: BodyModel
         root_sum[:H] += np.linalg.norm((gen.root_pos - seq.root_pos[tgt])[..., [0, 2]], axis=-1).sum(0)
         root_cnt[:H] += err.shape[0]
     curve = {k: (sums[k] / np.maximum(counts[k], 1)).tolist() for k in sums}
-    return {"curve_deg": curve, "root_xz_error_m": (root_sum / np.maximum(root_cnt, 1)).tolist(), "rollouts": int(counts["all"][0])}
+    return {
+        "curve_deg": curve,
+        "root_xz_error_m": (root_sum / np.maximum(root_cnt, 1)).tolist(),
+        "rollouts": int(counts["all"][0]),
+    }
 
 
 def dtw_errors(pred: Predictor, seqs: list[Sequence], body: BodyModel, motion_types: dict) -> dict:
@@ -127,8 +140,11 @@ def dtw_errors(pred: Predictor, seqs: list[Sequence], body: BodyModel, motion_ty
     def stack(attr: str) -> np.ndarray:
         return np.stack([getattr(s, attr)[t] for s, t in zip(seqs, tgt)])
 
-    seed = Buffer(np.stack([s.root_pos[:1] for s in seqs]), np.stack([s.root_rot[:1] for s in seqs]),
-                  np.stack([R.log_map(s.joint_rot[:1]).reshape(1, -1) for s in seqs]))
+    seed = Buffer(
+        np.stack([s.root_pos[:1] for s in seqs]),
+        np.stack([s.root_rot[:1] for s in seqs]),
+        np.stack([R.log_map(s.joint_rot[:1]).reshape(1, -1) for s in seqs]),
+    )
     gen = rollout(pred, body, seed, stack("com"), reference_for(pred, body, stack("root_pos"), stack("root_rot")))
     J = body.num_joints
     ej = body.error_joints
@@ -163,27 +179,59 @@ def evaluate(targets: list[str], options: dict, overrides: list[str]) -> dict:
     for r in runs[1:]:
         diff = [k for k in SPLIT_KEYS if r.cfg.data[k] != base.cfg.data[k]]
         if diff:
-            raise CharctlError(f"{r.dir} uses different data.{diff[0]} than {base.dir}: evaluate runs of one split together")
+            raise CharctlError(
+                f"{r.dir} uses different data.{diff[0]} than {base.dir}: evaluate runs of one split together"
+            )
     cfg = base.cfg
     train_seqs, test_seqs = split_sequences(base.seqs, cfg.data.test_clips)
     if not test_seqs:
         raise CharctlError("no held-out clips (data.test_clips is empty): nothing to evaluate")
     body, types = base.body, dict(cfg.eval.motion_types)
     print(f"held-out clips: {', '.join(s.name for s in test_seqs)}")
-    nn = fit_nearest_neighbour(WindowSet(train_seqs, body, int(cfg.data.history), str(cfg.data.frame)),
-                               int(cfg.eval.nn_pca_dims), float(cfg.eval.nn_com_weight), int(cfg.seed))
+    nn = fit_nearest_neighbour(
+        WindowSet(train_seqs, body, int(cfg.data.history), str(cfg.data.frame)),
+        int(cfg.eval.nn_pca_dims),
+        float(cfg.eval.nn_com_weight),
+        int(cfg.seed),
+    )
     preds: list[Predictor] = [r.predictor() for r in runs] + [nn, LastFrame(int(cfg.data.history), str(cfg.data.frame))]
     out_dir = Path(options.get("out") or base.dir / "eval")
     out_dir.mkdir(parents=True, exist_ok=True)
-    result: dict = {"runs": [str(r.dir) for r in runs], "test_clips": [s.name for s in test_seqs],
-                    "train_clips": sorted({s.base for s in train_seqs}), "motion_types": {k: list(v) for k, v in types.items()},
-                    "paper_table5": dict(cfg.eval.paper_table5), "fps": float(cfg.data.fps)}
+    result: dict = {
+        "runs": [str(r.dir) for r in runs],
+        "test_clips": [s.name for s in test_seqs],
+        "train_clips": sorted({s.base for s in train_seqs}),
+        "motion_types": {k: list(v) for k, v in types.items()},
+        "paper_table5": dict(cfg.eval.paper_table5),
+        "fps": float(cfg.data.fps),
+    }
     if options.get("pose_error"):
         horizon = max(1, int(round(float(cfg.eval.horizon_s) * cfg.data.fps)))
         result["teacher_forced"] = {p.name: teacher_forced_errors(p, test_seqs, body, types) for p in preds}
-        result["autoregressive"] = {p.name: autoregressive_errors(p, test_seqs, body, horizon, int(cfg.eval.ar_stride), types) for p in preds}
-        result["generation"] = {r.label: generation_demo(r, out_dir / f"generation_{n}.png") for n, r in enumerate(runs)}
-        result["training"] = {r.label: {k: r.metrics.get(k) for k in ("step", "samples", "wall_s", "samples_per_s", "train_loss_ema", "test_loss", "train_windows", "test_windows", "parameters", "device")} for r in runs}
+        result["autoregressive"] = {
+            p.name: autoregressive_errors(p, test_seqs, body, horizon, int(cfg.eval.ar_stride), types) for p in preds
+        }
+        result["generation"] = {
+            r.label: generation_demo(r, out_dir / f"generation_{n}.png") for n, r in enumerate(runs)
+        }
+        result["training"] = {
+            r.label: {
+                k: r.metrics.get(k)
+                for k in (
+                    "step",
+                    "samples",
+                    "wall_s",
+                    "samples_per_s",
+                    "train_loss_ema",
+                    "test_loss",
+                    "train_windows",
+                    "test_windows",
+                    "parameters",
+                    "device",
+                )
+            }
+            for r in runs
+        }
         plot_ar_curves(result["autoregressive"], float(cfg.data.fps), out_dir / "ar_curve.png")
     if options.get("dtw"):
         result["dtw"] = {p.name: dtw_errors(p, test_seqs, body, types) for p in preds}
@@ -221,33 +269,79 @@ def _row(cells) -> str:
 def render_report(res: dict) -> str:
     """Markdown: Table 5 style comparison, autoregressive curve, training/generation numbers, DTW."""
     types = list(dict.fromkeys([*res["motion_types"], "other"]))
-    lines = ["# com-cnn evaluation", "",
-             f"Held-out clips: {', '.join(res['test_clips'])}.  ",
-             f"Training clips: {', '.join(res['train_clips'])} (and mirrors where data.mirror).  ",
-             "Paper motion types: " + "; ".join(f"{k} = DeepMimic labels {', '.join(v)}" for k, v in res["motion_types"].items()) + "; other = every other label.", ""]
+    lines = [
+        "# com-cnn evaluation",
+        "",
+        f"Held-out clips: {', '.join(res['test_clips'])}.  ",
+        f"Training clips: {', '.join(res['train_clips'])} (and mirrors where data.mirror).  ",
+        "Paper motion types: "
+        + "; ".join(f"{k} = DeepMimic labels {', '.join(v)}" for k, v in res["motion_types"].items())
+        + "; other = every other label.",
+        "",
+    ]
     if "teacher_forced" in res:
         lines += _teacher_forced_section(res, types) + _autoregressive_section(res, types) + _speed_section(res)
     if "dtw" in res:
-        lines += ["", "## DTW: whole held-out clips generated from their first frame and COM path", "",
-                  "Mean per-frame e_pose (radians, l2 over the movable joints, as " "in cgail's eq. 6.1) after DTW alignment to the ground truth; "
-                  "frame by frame without alignment in brackets.", "",
-                  _row(["model", *types, "all"]), _row(["---"] * (len(types) + 2))]
+        lines += [
+            "",
+            "## DTW: whole held-out clips generated from their first frame and COM path",
+            "",
+            "Mean per-frame e_pose (radians, l2 over the movable joints, as "
+            "in cgail's eq. 6.1) after DTW alignment to the ground truth; "
+            "frame by frame without alignment in brackets.",
+            "",
+            _row(["model", *types, "all"]),
+            _row(["---"] * (len(types) + 2)),
+        ]
         for name, r in res["dtw"].items():
-            lines.append(_row([name, *[f"{r['per_type'][t]:.3f} ({r['framewise_per_type'][t]:.3f})" if t in r["per_type"] else "–" for t in types],
-                               f"{r['all']:.3f} ({r['framewise_all']:.3f})"]))
+            lines.append(
+                _row(
+                    [
+                        name,
+                        *[
+                            f"{r['per_type'][t]:.3f} ({r['framewise_per_type'][t]:.3f})" if t in r["per_type"] else "–"
+                            for t in types
+                        ],
+                        f"{r['all']:.3f} ({r['framewise_all']:.3f})",
+                    ]
+                )
+            )
     return "\n".join(lines) + "\n"
 
 
 def _teacher_forced_section(res: dict, types: list[str]) -> list[str]:
-    lines = ["## Teacher forcing (Table 5 style): mean joint-angle error, degrees", "",
-             "History and C_t from the ground truth. Error = angle " "between the predicted and the true local rotation, "
-             "averaged over the movable joints and every frame of the held-out clips.", "",
-             _row(["model", *types, "all", "frames"]), _row(["---"] * (len(types) + 3))]
+    lines = [
+        "## Teacher forcing (Table 5 style): mean joint-angle error, degrees",
+        "",
+        "History and C_t from the ground truth. Error = angle "
+        "between the predicted and the true local rotation, "
+        "averaged over the movable joints and every frame of the held-out clips.",
+        "",
+        _row(["model", *types, "all", "frames"]),
+        _row(["---"] * (len(types) + 3)),
+    ]
     for name, r in res["teacher_forced"].items():
-        lines.append(_row([name, *[f"{r['per_type'][t]:.2f}" if t in r["per_type"] else "–" for t in types], f"{r['all']:.2f}", r["frames"]]))
+        lines.append(
+            _row(
+                [
+                    name,
+                    *[f"{r['per_type'][t]:.2f}" if t in r["per_type"] else "–" for t in types],
+                    f"{r['all']:.2f}",
+                    r["frames"],
+                ]
+            )
+        )
     paper = res["paper_table5"]
-    lines.append(_row(["paper Table 5 (its own mocap; units not stated)", *[paper.get(t, "–") for t in types], "–", "–"]))
-    lines += ["", "Per clip (teacher forcing, degrees):", "", _row(["model", *res["test_clips"]]), _row(["---"] * (len(res["test_clips"]) + 1))]
+    lines.append(
+        _row(["paper Table 5 (its own mocap; units not stated)", *[paper.get(t, "–") for t in types], "–", "–"])
+    )
+    lines += [
+        "",
+        "Per clip (teacher forcing, degrees):",
+        "",
+        _row(["model", *res["test_clips"]]),
+        _row(["---"] * (len(res["test_clips"]) + 1)),
+    ]
     for name, r in res["teacher_forced"].items():
         lines.append(_row([name, *[f"{r['per_clip'].get(c, float('nan')):.2f}" for c in res["test_clips"]]]))
     return lines
@@ -258,34 +352,93 @@ def _autoregressive_section(res: dict, types: list[str]) -> list[str]:
     ar = res["autoregressive"]
     n = len(next(iter(ar.values()))["curve_deg"]["all"])
     marks = [h for h in (1, 5, 15, 30, 60, 90, 150, 300) if h <= n]
-    lines = ["", "## Autoregressive: error against horizon (history = the model's own output)", "",
-             "Seeded with ground-truth history at every " + "k-th frame of each held-out clip, then self-fed; C_t from the ground truth. "
-             "With data.frame=root_t the root's heading frame at t is also the ground truth's " "(the paper's input needs it); "
-             "with root_prev the model places the root itself.", "", "![autoregressive error](ar_curve.png)", "",
-             _row(["model", "type", *[f"{h / fps:.2f} s" for h in marks], "root xz error at the end (m)"]), _row(["---"] * (len(marks) + 3))]
+    lines = [
+        "",
+        "## Autoregressive: error against horizon (history = the model's own output)",
+        "",
+        "Seeded with ground-truth history at every "
+        + "k-th frame of each held-out clip, then self-fed; C_t from the ground truth. "
+        "With data.frame=root_t the root's heading frame at t is also the ground truth's "
+        "(the paper's input needs it); "
+        "with root_prev the model places the root itself.",
+        "",
+        "![autoregressive error](ar_curve.png)",
+        "",
+        _row(["model", "type", *[f"{h / fps:.2f} s" for h in marks], "root xz error at the end (m)"]),
+        _row(["---"] * (len(marks) + 3)),
+    ]
     for name, r in ar.items():
         for key in ["all", *[t for t in types if t in r["curve_deg"]]]:
             c = r["curve_deg"][key]
-            lines.append(_row([name, key, *[f"{c[h - 1]:.1f}" for h in marks], f"{r['root_xz_error_m'][-1]:.2f}" if key == "all" else ""]))
+            lines.append(
+                _row(
+                    [
+                        name,
+                        key,
+                        *[f"{c[h - 1]:.1f}" for h in marks],
+                        f"{r['root_xz_error_m'][-1]:.2f}" if key == "all" else "",
+                    ]
+                )
+            )
     return lines
 
 
 def _speed_section(res: dict) -> list[str]:
-    lines = ["", "## Training and generation", "",
-             _row(["model", "steps", "samples", "train wall (s)", "samples/s", "final loss (EMA)", "gen frames/s (batch 1, CPU)", "x real time", "COM tracking (cm)"]),
-             _row(["---"] * 9)]
+    lines = [
+        "",
+        "## Training and generation",
+        "",
+        _row(
+            [
+                "model",
+                "steps",
+                "samples",
+                "train wall (s)",
+                "samples/s",
+                "final loss (EMA)",
+                "gen frames/s (batch 1, CPU)",
+                "x real time",
+                "COM tracking (cm)",
+            ]
+        ),
+        _row(["---"] * 9),
+    ]
     for name, t in res["training"].items():
         g = res["generation"][name]
-        lines.append(_row([name, t.get("step"), t.get("samples"), _fmt(t.get("wall_s"), 1), _fmt(t.get("samples_per_s"), 0),
-                           _fmt(t.get("train_loss_ema"), 4), f"{g['frames_per_s']:.0f}", f"{g['real_time_factor']:.1f}",
-                           f"{100 * g['com_tracking_error_m']:.1f}"]))
-    lines += ["", "Generation demo (eval): seed = the first frames of " "the seed clip, then a circle of radius 2 m at 1.2 m/s "
-              "with the COM lowered by generate.crouch_drop from 60 % of " "the path on. COM tracking = mean distance between the "
-              "generated body's COM (paper mass table) and the input COM.", ""]
+        lines.append(
+            _row(
+                [
+                    name,
+                    t.get("step"),
+                    t.get("samples"),
+                    _fmt(t.get("wall_s"), 1),
+                    _fmt(t.get("samples_per_s"), 0),
+                    _fmt(t.get("train_loss_ema"), 4),
+                    f"{g['frames_per_s']:.0f}",
+                    f"{g['real_time_factor']:.1f}",
+                    f"{100 * g['com_tracking_error_m']:.1f}",
+                ]
+            )
+        )
+    lines += [
+        "",
+        "Generation demo (eval): seed = the first frames of "
+        "the seed clip, then a circle of radius 2 m at 1.2 m/s "
+        "with the COM lowered by generate.crouch_drop from 60 % of "
+        "the path on. COM tracking = mean distance between the "
+        "generated body's COM (paper mass table) and the input COM.",
+        "",
+    ]
     for n, name in enumerate(res["generation"]):
         g = res["generation"][name]
-        lines += [f"{name}: root height {g['root_height_m'][0]:.2f}–{g['root_height_m'][1]:.2f} " "m for an input COM height of "
-                  f"{g['input_com_height_m'][0]:.2f}–{g['input_com_height_m'][1]:.2f} m.", "", f"![generation {n}](generation_{n}.png)", ""]
+        lines += [
+            f"{name}: root height {g['root_height_m'][0]:.2f}–{g['root_height_m'][1]:.2f} "
+            "m for an input COM height of "
+            f"{g['input_com_height_m'][0]:.2f}–{g['input_com_height_m'][1]:.2f} m.",
+            "",
+            f"![generation {n}](generation_{n}.png)",
+            "",
+        ]
     return lines
 
 

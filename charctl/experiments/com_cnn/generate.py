@@ -67,7 +67,10 @@ def read_com_csv(path: str | Path, fps: float) -> np.ndarray:
         raise CharctlError(f"com path {p}: empty file")
     header = [c.strip().lower() for c in rows[0]]
     if header not in (["x", "y", "z"], ["t", "x", "y", "z"]):
-        raise CharctlError(f"com path {p}: expected the header 'x,y,z' or 't,x,y,z' " f"(metres, y up; t in seconds), got '{','.join(rows[0])}'")
+        raise CharctlError(
+            f"com path {p}: expected the header 'x,y,z' or 't,x,y,z' "
+            f"(metres, y up; t in seconds), got '{','.join(rows[0])}'"
+        )
     values = np.empty((len(rows) - 1, len(header)))
     for n, row in enumerate(rows[1:]):
         if len(row) != len(header):
@@ -75,7 +78,9 @@ def read_com_csv(path: str | Path, fps: float) -> np.ndarray:
         try:
             values[n] = [float(c) for c in row]
         except ValueError:
-            raise CharctlError(f"com path {p}: line {n + 2} holds a value that is not a number: {','.join(row)}") from None
+            raise CharctlError(
+                f"com path {p}: line {n + 2} holds a value that is not a number: {','.join(row)}"
+            ) from None
         if not np.all(np.isfinite(values[n])):
             raise CharctlError(f"com path {p}: line {n + 2} holds a NaN or infinite value")
     if values.shape[0] < 2:
@@ -90,7 +95,9 @@ def read_com_csv(path: str | Path, fps: float) -> np.ndarray:
     return np.stack([np.interp(grid, t, values[:, a]) for a in (1, 2, 3)], axis=1)
 
 
-def circle_path(start: np.ndarray, frames: int, fps: float, r: float = 2.0, speed: float = 1.2, dir: str = "left") -> np.ndarray:
+def circle_path(
+    start: np.ndarray, frames: int, fps: float, r: float = 2.0, speed: float = 1.2, dir: str = "left"
+) -> np.ndarray:
     """A circle of radius r (m) walked at `speed` (m/s) from `start`, initially heading +z, turning left/right."""
     if r <= 0:
         raise CharctlError("circle: r must be positive")
@@ -133,7 +140,9 @@ def procedural_path(spec: str, start: np.ndarray, frames: int, fps: float) -> np
         raise CharctlError(f"com path {spec!r}: {name} takes {', '.join(names)}") from None
 
 
-def make_com_path(spec: str, start: np.ndarray, seconds: float, fps: float, crouch_at: float | None, gen_cfg) -> np.ndarray:
+def make_com_path(
+    spec: str, start: np.ndarray, seconds: float, fps: float, crouch_at: float | None, gen_cfg
+) -> np.ndarray:
     """The input COM path (H, 3) of a --com-path spec, translated to `start`, with the crouch and the clamp."""
     name = spec.partition(":")[0]
     if name in PATHS:
@@ -142,7 +151,10 @@ def make_com_path(spec: str, start: np.ndarray, seconds: float, fps: float, crou
         path = read_com_csv(spec, fps)
         path = path + (start - path[0]) * XZ  # first point onto the seed's last COM (horizontally)
     else:
-        raise CharctlError(f"com path {spec!r}: give a .csv file or one of " f"{', '.join(f'{k}:...' for k in PATHS)} (e.g. circle:r=2,speed=1.2)")
+        raise CharctlError(
+            f"com path {spec!r}: give a .csv file or one of "
+            f"{', '.join(f'{k}:...' for k in PATHS)} (e.g. circle:r=2,speed=1.2)"
+        )
     if crouch_at is not None:
         t = np.arange(1, path.shape[0] + 1) / fps
         ramp = np.clip((t - crouch_at) / max(float(gen_cfg.crouch_ramp_s), 1e-9), 0.0, 1.0)
@@ -166,21 +178,38 @@ def seed_sequence(run) -> Sequence:
     seq = next((s for s in run.seqs if s.name == name), None)
     if seq is None:
         if run.body.kind != "humanoid":
-            raise CharctlError(f"generate.seed_clip={name!r} is not among the clips of " f"data.bvh_dir ({', '.join(s.name for s in run.seqs[:6])}, ...)")
+            raise CharctlError(
+                f"generate.seed_clip={name!r} is not among the clips of "
+                f"data.bvh_dir ({', '.join(s.name for s in run.seqs[:6])}, ...)"
+            )
         from charctl.motion.library import load_clip
 
         clip = load_clip(name).resample(run.cfg.data.fps)
-        seq = make_sequence(clip.name, name, clip.label, clip.fps, clip.root_pos, clip.local_rot[:, 0], clip.local_rot[:, 1:],
-                            clip.loop, run.cfg.data, run.body)
+        seq = make_sequence(
+            clip.name,
+            name,
+            clip.label,
+            clip.fps,
+            clip.root_pos,
+            clip.local_rot[:, 0],
+            clip.local_rot[:, 1:],
+            clip.loop,
+            run.cfg.data,
+            run.body,
+        )
     L = min(int(run.cfg.data.history), seq.num_frames)
-    pos, rot = canonical_start(seq.root_pos[:L][::-1], seq.root_rot[:L][::-1], run.body.forward)  # last frame -> origin, +z
+    pos, rot = canonical_start(
+        seq.root_pos[:L][::-1], seq.root_rot[:L][::-1], run.body.forward
+    )  # last frame -> origin, +z
     pos, rot, joints = pos[::-1].copy(), rot[::-1].copy(), seq.joint_rot[:L]
     out = Sequence(seq.name, seq.base, seq.label, seq.fps, pos, rot, joints)
     out.com = run.body.com(pos, rot, joints)
     return out
 
 
-def estimated_root_reference(body: BodyModel, com_all: np.ndarray, first: int, window: int, min_speed: float, fps: float) -> ReferenceFn:
+def estimated_root_reference(
+    body: BodyModel, com_all: np.ndarray, first: int, window: int, min_speed: float, fps: float
+) -> ReferenceFn:
     """data.frame=root_t without ground truth: estimate the root's heading frame at t from the COM path.
 
     Heading: the previous root heading turned by as much as the COM's direction of travel turned
@@ -214,18 +243,24 @@ def reference_for_generation(run, com_all: np.ndarray, first: int) -> ReferenceF
     if run.cfg.data.frame == "root_prev":
         return previous_root_reference(run.body)
     g = run.cfg.generate
-    return estimated_root_reference(run.body, com_all, first, int(g.heading_window), float(g.min_com_speed), float(run.cfg.data.fps))
+    return estimated_root_reference(
+        run.body, com_all, first, int(g.heading_window), float(g.min_com_speed), float(run.cfg.data.fps)
+    )
 
 
 def generate(run, com_path: np.ndarray, seed: Sequence) -> tuple[Buffer, float]:
     """Generated frames (batch 1) for a COM path (H, 3) after `seed`, and the wall time in seconds."""
     pred = run.predictor()
     i = pred.history
-    seed_buf = Buffer(seed.root_pos[None], seed.root_rot[None], R.log_map(seed.joint_rot).reshape(1, seed.num_frames, -1))
+    seed_buf = Buffer(
+        seed.root_pos[None], seed.root_rot[None], R.log_map(seed.joint_rot).reshape(1, seed.num_frames, -1)
+    )
     pad = max(i - seed.num_frames, 0)
     com_all = np.concatenate([np.repeat(seed.com[:1], pad, 0), seed.com, com_path])[None]
     t0 = time.perf_counter()
-    gen = rollout(pred, run.body, seed_buf, com_path[None], reference_for_generation(run, com_all, pad + seed.num_frames))
+    gen = rollout(
+        pred, run.body, seed_buf, com_path[None], reference_for_generation(run, com_all, pad + seed.num_frames)
+    )
     return gen, time.perf_counter() - t0
 
 
@@ -244,11 +279,26 @@ def generate_motion(run, spec: str, seconds: float, crouch_at: float | None) -> 
     L, H = seed.num_frames, com_path.shape[0]
     err = np.linalg.norm(com_out[L:] - com_path, axis=1)
     return {
-        "seed": seed, "com_path": com_path, "root_pos": root_pos, "root_rot": root_rot, "joint_rot": joint_rot, "com_out": com_out,
-        "stats": {"path": spec, "crouch_at_s": crouch_at, "seed_clip": seed.name, "seed_frames": L, "frames": H, "wall_s": wall,
-                  "frames_per_s": H / wall, "real_time_factor": H / wall / fps, "com_tracking_error_m": float(err.mean()),
-                  "com_tracking_error_max_m": float(err.max()), "input_com_height_m": [float(com_path[:, 1].min()), float(com_path[:, 1].max())],
-                  "root_height_m": [float(root_pos[L:, 1].min()), float(root_pos[L:, 1].max())]},
+        "seed": seed,
+        "com_path": com_path,
+        "root_pos": root_pos,
+        "root_rot": root_rot,
+        "joint_rot": joint_rot,
+        "com_out": com_out,
+        "stats": {
+            "path": spec,
+            "crouch_at_s": crouch_at,
+            "seed_clip": seed.name,
+            "seed_frames": L,
+            "frames": H,
+            "wall_s": wall,
+            "frames_per_s": H / wall,
+            "real_time_factor": H / wall / fps,
+            "com_tracking_error_m": float(err.mean()),
+            "com_tracking_error_max_m": float(err.max()),
+            "input_com_height_m": [float(com_path[:, 1].min()), float(com_path[:, 1].max())],
+            "root_height_m": [float(root_pos[L:, 1].min()), float(root_pos[L:, 1].max())],
+        },
     }
 
 
@@ -268,7 +318,14 @@ def frames_to_clip(run, name: str, root_pos, root_rot, joint_rot):
     from charctl.motion.clip import Clip
 
     local = np.concatenate([root_rot[:, None], joint_rot], axis=1)
-    return Clip(name=name, fps=float(run.cfg.data.fps), root_pos=root_pos, local_rot=local, label="generated", skeleton=run.body.skeleton)
+    return Clip(
+        name=name,
+        fps=float(run.cfg.data.fps),
+        root_pos=root_pos,
+        local_rot=local,
+        label="generated",
+        skeleton=run.body.skeleton,
+    )
 
 
 def write_generic_bvh(body: BodyModel, root_pos, root_rot, joint_rot, fps: float, path: Path) -> Path:
@@ -281,7 +338,11 @@ def write_generic_bvh(body: BodyModel, root_pos, root_rot, joint_rot, fps: float
     cols = []
     for j, chans in enumerate(body.bvh_channels):  # write time, not a hot path
         rot_ch = [c for c in chans if c.lower().endswith("rotation")]
-        eul = Rotation.from_quat(local[:, j]).as_euler("".join(c[0].upper() for c in rot_ch), degrees=True) if rot_ch else None
+        eul = (
+            Rotation.from_quat(local[:, j]).as_euler("".join(c[0].upper() for c in rot_ch), degrees=True)
+            if rot_ch
+            else None
+        )
         for c in chans:
             axis = "XYZ".index(c[0].upper())
             if c.lower().endswith("position"):
@@ -289,7 +350,12 @@ def write_generic_bvh(body: BodyModel, root_pos, root_rot, joint_rot, fps: float
             else:
                 cols.append(eul[:, rot_ch.index(c)])
     data = np.stack(cols, axis=1)
-    text = body.bvh_header + f"MOTION\nFrames: {T}\nFrame Time: {1.0 / fps:.8f}\n" + "\n".join(" ".join(f"{v:.6f}" for v in row) for row in data) + "\n"
+    text = (
+        body.bvh_header
+        + f"MOTION\nFrames: {T}\nFrame Time: {1.0 / fps:.8f}\n"
+        + "\n".join(" ".join(f"{v:.6f}" for v in row) for row in data)
+        + "\n"
+    )
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(text)
@@ -308,7 +374,12 @@ def render_with_com(clip, com: np.ndarray, path: Path) -> dict:
 
     def annotate(scene, t: int) -> None:
         ball = (mujoco.mjtGeom.mjGEOM_SPHERE, np.array([0.06, 0.0, 0.0]), com[t], np.eye(3).ravel())
-        shadow = (mujoco.mjtGeom.mjGEOM_CYLINDER, np.array([0.07, 0.003, 0.0]), com[t] * [1.0, 0.0, 1.0] + [0, 0.004, 0], z_up_to_y_up)
+        shadow = (
+            mujoco.mjtGeom.mjGEOM_CYLINDER,
+            np.array([0.07, 0.003, 0.0]),
+            com[t] * [1.0, 0.0, 1.0] + [0, 0.004, 0],
+            z_up_to_y_up,
+        )
         for kind, size, pos, mat in (ball, shadow):
             if scene.ngeom < scene.maxgeom:
                 mujoco.mjv_initGeom(scene.geoms[scene.ngeom], kind, size, pos, mat, purple)

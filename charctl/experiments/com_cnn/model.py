@@ -22,8 +22,17 @@ ACTIVATIONS: dict[str, type[nn.Module]] = {"none": nn.Identity, "relu": nn.ReLU}
 class ComCNN(nn.Module):
     """History (B, i, D) + COM (B, 3) -> pose (B, D). `use_com=False` is the history-only baseline."""
 
-    def __init__(self, pose_dim: int, history: int, channels: list[int], kernel: int = 10, pool: int = 2,
-                 fc_hidden: int = 512, fc_activation: str = "none", use_com: bool = True) -> None:
+    def __init__(
+        self,
+        pose_dim: int,
+        history: int,
+        channels: list[int],
+        kernel: int = 10,
+        pool: int = 2,
+        fc_hidden: int = 512,
+        fc_activation: str = "none",
+        use_com: bool = True,
+    ) -> None:
         super().__init__()
         self.pose_dim, self.history, self.use_com = pose_dim, history, use_com
         layers: list[nn.Module] = []
@@ -34,7 +43,9 @@ class ComCNN(nn.Module):
         self.conv = nn.Sequential(*layers)
         self.z_dim = c_in * conv_output_length(history, kernel, pool, len(channels))
         k_dim = self.z_dim + (3 if use_com else 0)
-        self.fc = nn.Sequential(nn.Linear(k_dim, fc_hidden), ACTIVATIONS[fc_activation](), nn.Linear(fc_hidden, pose_dim))
+        self.fc = nn.Sequential(
+            nn.Linear(k_dim, fc_hidden), ACTIVATIONS[fc_activation](), nn.Linear(fc_hidden, pose_dim)
+        )
         for name, size in (("hist", pose_dim), ("com", 3), ("pose", pose_dim)):
             self.register_buffer(f"{name}_mean", torch.zeros(size))
             self.register_buffer(f"{name}_std", torch.ones(size))
@@ -69,11 +80,20 @@ class ComCNN(nn.Module):
 
 def build_model(cfg, pose_dim: int) -> ComCNN:
     m = cfg.model
-    return ComCNN(pose_dim, cfg.data.history, list(m.channels), m.kernel, m.pool, m.fc_hidden, m.fc_activation, m.use_com)
+    return ComCNN(
+        pose_dim, cfg.data.history, list(m.channels), m.kernel, m.pool, m.fc_hidden, m.fc_activation, m.use_com
+    )
 
 
 def model_signature(cfg, pose_dim: int) -> dict:
     """What a checkpoint must match to load into this config's network."""
     m = cfg.model
-    return {"pose_dim": pose_dim, "history": int(cfg.data.history), "channels": [int(c) for c in m.channels],
-            "kernel": int(m.kernel), "pool": int(m.pool), "fc_hidden": int(m.fc_hidden), "use_com": bool(m.use_com)}
+    return {
+        "pose_dim": pose_dim,
+        "history": int(cfg.data.history),
+        "channels": [int(c) for c in m.channels],
+        "kernel": int(m.kernel),
+        "pool": int(m.pool),
+        "fc_hidden": int(m.fc_hidden),
+        "use_com": bool(m.use_com),
+    }

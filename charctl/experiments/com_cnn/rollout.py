@@ -94,7 +94,9 @@ class NearestNeighbour:
         return self.values[np.argmin(d, axis=1)]
 
 
-def fit_nearest_neighbour(train: WindowSet, pca_dims: int, com_weight: float, seed: int = 0, chunk: int = 1024) -> NearestNeighbour:
+def fit_nearest_neighbour(
+    train: WindowSet, pca_dims: int, com_weight: float, seed: int = 0, chunk: int = 1024
+) -> NearestNeighbour:
     """Index every training window of `train` (history length and frame taken from it)."""
     import torch
 
@@ -124,8 +126,20 @@ def fit_nearest_neighbour(train: WindowSet, pca_dims: int, com_weight: float, se
     basis = V.double().numpy()
     var = float((sv.double().numpy() ** 2).sum() / max(X.shape[0] - 1, 1))
     com_scale = float(np.sqrt(var / 3.0) * com_weight)
-    nn = NearestNeighbour("nearest neighbour", train.history, train.frame, mean, std, com_mean, com_std, basis, center,
-                          com_scale, np.zeros((0, k + 3)), np.concatenate(values).astype(float))
+    nn = NearestNeighbour(
+        "nearest neighbour",
+        train.history,
+        train.frame,
+        mean,
+        std,
+        com_mean,
+        com_std,
+        basis,
+        center,
+        com_scale,
+        np.zeros((0, k + 3)),
+        np.concatenate(values).astype(float),
+    )
     keys = [nn.embed(*train.features(np.arange(s, min(s + chunk, S)))[:2]) for s in range(0, S, chunk)]
     nn.keys = np.concatenate(keys)
     return nn
@@ -163,8 +177,14 @@ def given_reference(origin: np.ndarray, q: np.ndarray) -> ReferenceFn:
     return ref
 
 
-def rollout(predictor: Predictor, body: BodyModel, seed: Buffer, com_path: np.ndarray, reference: ReferenceFn,
-            on_step: Callable[[int, Buffer], None] | None = None) -> Buffer:
+def rollout(
+    predictor: Predictor,
+    body: BodyModel,
+    seed: Buffer,
+    com_path: np.ndarray,
+    reference: ReferenceFn,
+    on_step: Callable[[int, Buffer], None] | None = None,
+) -> Buffer:
     """Generate H = com_path.shape[1] frames after the seed frames (B, L0 >= 1, ...), autoregressively.
 
     The seed is edge-padded at its start to the predictor's history length. `com_path` (B, H, 3)
@@ -178,7 +198,7 @@ def rollout(predictor: Predictor, body: BodyModel, seed: Buffer, com_path: np.nd
     def padded(x: np.ndarray) -> np.ndarray:
         out = np.empty((B, pad + L0 + H) + x.shape[2:])
         out[:, :pad] = x[:, :1]
-        out[:, pad:pad + L0] = x
+        out[:, pad : pad + L0] = x
         return out
 
     buf = Buffer(padded(seed.root_pos), padded(seed.root_rot), padded(seed.joint_exp))
@@ -186,7 +206,13 @@ def rollout(predictor: Predictor, body: BodyModel, seed: Buffer, com_path: np.nd
     for k in range(H):
         s = start + k
         origin, q = reference(k, s, buf, com_path[:, k])
-        hist = encode_pose(origin[:, None], q[:, None], buf.root_pos[:, s - i:s], buf.root_rot[:, s - i:s], buf.joint_exp[:, s - i:s])
+        hist = encode_pose(
+            origin[:, None],
+            q[:, None],
+            buf.root_pos[:, s - i : s],
+            buf.root_rot[:, s - i : s],
+            buf.joint_exp[:, s - i : s],
+        )
         com = R.rotate(R.conjugate(q), com_path[:, k] - origin)
         m = predictor.predict(hist, com)
         pos, rot, joints = decode_pose(m, origin, q, body)

@@ -43,7 +43,9 @@ class BatchSource:
         self.windows, self.device = windows, device
         self.dense = None
         if windows.dense_bytes() <= cache_mb * 1e6:
-            parts = [windows.features(np.arange(s, min(s + chunk, len(windows)))) for s in range(0, len(windows), chunk)]
+            parts = [
+                windows.features(np.arange(s, min(s + chunk, len(windows)))) for s in range(0, len(windows), chunk)
+            ]
             self.dense = tuple(torch.from_numpy(np.concatenate(p)).to(device) for p in zip(*parts))
 
     def __len__(self) -> int:
@@ -144,13 +146,32 @@ def train(cfg, run) -> dict:
         bad = first_non_finite({"train/loss_ema": ema}, model)
         if bad:  # never overwrite the last finite checkpoint with a diverged network
             stop_diverged(bad)
-        run.save_checkpoint({"model": model.state_dict(), "optimizer": opt.state_dict(), "step": step,
-                             "train_wall_s": wall, "loss_ema": ema, "pose_dim": body.pose_dim}, signature)
+        run.save_checkpoint(
+            {
+                "model": model.state_dict(),
+                "optimizer": opt.state_dict(),
+                "step": step,
+                "train_wall_s": wall,
+                "loss_ema": ema,
+                "pose_dim": body.pose_dim,
+            },
+            signature,
+        )
 
     def stop_diverged(what: str) -> None:
         run.log_scalars({"train/diverged": 1.0}, step * batch)
-        run.write_metrics({"diverged": True, "diverged_at_step": step, "diverged_on": what, "step": step,
-                           "samples": step * batch, "train_loss_ema": ema, "wall_s": wall, "device": device})
+        run.write_metrics(
+            {
+                "diverged": True,
+                "diverged_at_step": step,
+                "diverged_on": what,
+                "step": step,
+                "samples": step * batch,
+                "train_loss_ema": ema,
+                "wall_s": wall,
+                "device": device,
+            }
+        )
         raise diverged(what, where=f"step {step}", checkpoint=run.checkpoint_path)
 
     test_metrics: dict = {}
@@ -174,7 +195,10 @@ def train(cfg, run) -> dict:
                 stop_diverged(f"train/loss = {lv}")
             ema = lv if ema is None else 0.98 * ema + 0.02 * lv
             if step % 20 == 0 or step == steps:
-                run.log_scalars({"train/loss": lv, "train/loss_ema": ema, "train/samples_per_s": step * batch / max(wall, 1e-9)}, step * batch)
+                run.log_scalars(
+                    {"train/loss": lv, "train/loss_ema": ema, "train/samples_per_s": step * batch / max(wall, 1e-9)},
+                    step * batch,
+                )
             if test_source is not None and (step % int(cfg.train.eval_every) == 0 or step == steps):
                 test_metrics = evaluate_test(model, test_source, body)
                 run.log_scalars({f"test/{k}": v for k, v in test_metrics.items()}, step * batch)
@@ -182,15 +206,27 @@ def train(cfg, run) -> dict:
             if step % int(cfg.train.checkpoint_every) == 0 or stop.requested:
                 save()
             if stop.requested:
-                raise stop.interrupted(f"interrupted at step {step} ({step * batch} samples): checkpoint written; "
-                                       f"continue with --resume {run.dir}")
+                raise stop.interrupted(
+                    f"interrupted at step {step} ({step * batch} samples): checkpoint written; "
+                    f"continue with --resume {run.dir}"
+                )
     save()
     metrics = {
-        "step": step, "samples": step * batch, "train_loss_ema": ema, **{f"test_{k}": v for k, v in test_metrics.items()},
-        "wall_s": wall, "samples_per_s": step * batch / max(wall, 1e-9), "data_build_s": data_s,
-        "train_windows": len(train_w), "test_windows": len(test_w), "pose_dim": body.pose_dim,
-        "z_dim": model.z_dim, "parameters": sum(p.numel() for p in model.parameters()), "device": device,
-        "train_clips": sorted({s.base for s in train_w.seqs}), "test_clips": sorted({s.base for s in test_w.seqs}),
+        "step": step,
+        "samples": step * batch,
+        "train_loss_ema": ema,
+        **{f"test_{k}": v for k, v in test_metrics.items()},
+        "wall_s": wall,
+        "samples_per_s": step * batch / max(wall, 1e-9),
+        "data_build_s": data_s,
+        "train_windows": len(train_w),
+        "test_windows": len(test_w),
+        "pose_dim": body.pose_dim,
+        "z_dim": model.z_dim,
+        "parameters": sum(p.numel() for p in model.parameters()),
+        "device": device,
+        "train_clips": sorted({s.base for s in train_w.seqs}),
+        "test_clips": sorted({s.base for s in test_w.seqs}),
     }
     run.write_metrics(metrics)
     return metrics

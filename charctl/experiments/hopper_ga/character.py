@@ -130,7 +130,11 @@ def rot_zx(phi: np.ndarray) -> np.ndarray:
 
 def matmul3(A: np.ndarray, B: np.ndarray) -> np.ndarray:
     """Batched 3x3 @ 3x3 written out (no BLAS: the result of a row never depends on the batch size)."""
-    return A[..., :, 0, None] * B[..., None, 0, :] + A[..., :, 1, None] * B[..., None, 1, :] + A[..., :, 2, None] * B[..., None, 2, :]
+    return (
+        A[..., :, 0, None] * B[..., None, 0, :]
+        + A[..., :, 1, None] * B[..., None, 1, :]
+        + A[..., :, 2, None] * B[..., None, 2, :]
+    )
 
 
 def matvec3(A: np.ndarray, v: np.ndarray) -> np.ndarray:

@@ -36,7 +36,9 @@ class SegmentConfig:
     name: str = "chest"
     parent: str = "root"  # "root" = the pelvis
     offset: list[float] = field(default_factory=lambda: [0.0, 0.1, 0.0])  # m, joint position in the parent's frame
-    direction: list[float] = field(default_factory=lambda: [0.0, 1.0, 0.0])  # unit vector of the segment in the rest pose
+    direction: list[float] = field(
+        default_factory=lambda: [0.0, 1.0, 0.0]
+    )  # unit vector of the segment in the rest pose
     length: float = 0.45  # m
     mass: float = 0.355  # fraction of character.mass
     com: float = 0.5  # COM position along the segment, fraction of its length from the joint
@@ -81,8 +83,12 @@ class BoundsConfig:
     alpha: list[float] = field(default_factory=lambda: [0.55, 1.0])  # eq 6: extremum of B_c at alpha*T
     swing_angle: list[float] = field(default_factory=lambda: [-1.2, 0.0])  # rad, active leg theta_c at stance start
     swing_bend: list[float] = field(default_factory=lambda: [0.0, 1.2])  # rad, active leg theta_l at stance start
-    swing_gain: list[float] = field(default_factory=lambda: [0.0, 3.0])  # active theta_c = angle + gain*(theta0 - idle theta_c)
-    bend_gain: list[float] = field(default_factory=lambda: [-2.0, 2.0])  # active theta_l = bend + gain*(theta0 - idle theta_c)
+    swing_gain: list[float] = field(
+        default_factory=lambda: [0.0, 3.0]
+    )  # active theta_c = angle + gain*(theta0 - idle theta_c)
+    bend_gain: list[float] = field(
+        default_factory=lambda: [-2.0, 2.0]
+    )  # active theta_l = bend + gain*(theta0 - idle theta_c)
     eta: list[float] = field(default_factory=lambda: [0.0, 10.0])  # eq 11 response, one gene per balance DOF
 
 
@@ -95,7 +101,9 @@ class BalanceConfig:
 class FitnessConfig:
     """eq 12-14."""
 
-    energy_scale: float = 4.0e5  # E_r unit (kg m^2 s^-3 per m): the GA's lowest E_r at 2-10 m/s is ~0.15 of it; see docs
+    energy_scale: float = (
+        4.0e5  # E_r unit (kg m^2 s^-3 per m): the GA's lowest E_r at 2-10 m/s is ~0.15 of it; see docs
+    )
     predict_with_h: bool = True  # gamma's predicted speed is theta_dot_s + theta_ddot_s * h (paper omits h)
     omega_floor: float = 0.1  # rad/s, softens max/min in gamma when a speed is near zero
 
@@ -163,7 +171,18 @@ class Config(BaseConfig):
             return f"hopper.thigh_fraction must lie in [0.2, 0.5], got {cfg.hopper.thigh_fraction}"
         if not 0 < cfg.hopper.knee_max_flexion_deg < 180:
             return "hopper.knee_max_flexion_deg must lie in (0, 180)"
-        for name in ("l", "kappa", "theta0", "m", "alpha", "swing_angle", "swing_bend", "swing_gain", "bend_gain", "eta"):
+        for name in (
+            "l",
+            "kappa",
+            "theta0",
+            "m",
+            "alpha",
+            "swing_angle",
+            "swing_bend",
+            "swing_gain",
+            "bend_gain",
+            "eta",
+        ):
             b = list(getattr(cfg.bounds, name))
             if len(b) != 2 or not b[0] < b[1]:
                 return f"bounds.{name} must be [low, high] with low < high, got {b}"

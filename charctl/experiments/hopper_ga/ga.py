@@ -99,7 +99,9 @@ def evolve(
     lo, hi = [float(v) for v in low], [float(v) for v in high]
     toolbox = base.Toolbox()
     toolbox.register("mate", tools.cxSimulatedBinaryBounded, eta=float(ga_cfg.cx_eta), low=lo, up=hi)
-    toolbox.register("mutate", tools.mutPolynomialBounded, eta=float(ga_cfg.mut_eta), low=lo, up=hi, indpb=float(ga_cfg.indpb))
+    toolbox.register(
+        "mutate", tools.mutPolynomialBounded, eta=float(ga_cfg.mut_eta), low=lo, up=hi, indpb=float(ga_cfg.indpb)
+    )
     toolbox.register("select", tools.selTournament, tournsize=int(ga_cfg.tournament))
 
     def run_eval(genomes: np.ndarray) -> dict:
@@ -124,7 +126,10 @@ def evolve(
             for k in metrics:
                 metrics[k][bad] = redo[k]
         if not metrics["valid"].any():
-            raise CharctlError(f"no physically valid individual in {N} x {int(ga_cfg.init_retries) + 1} " "random draws; widen the bounds (see `charctl config hopper-ga`)")
+            raise CharctlError(
+                f"no physically valid individual in {N} x {int(ga_cfg.init_retries) + 1} "
+                "random draws; widen the bounds (see `charctl config hopper-ga`)"
+            )
         _assign(pop, metrics["fitness"])
         _record(st, pop, metrics)
         if on_generation:
@@ -196,7 +201,9 @@ def _gather_metrics(pop_next, elite_rows, offspring, fresh, new, old, pop_old) -
 
 def _best_metrics(pop, metrics: dict) -> dict:
     i = int(np.argmin(metrics["fitness"]))
-    return {k: (v[i].item() if np.ndim(v[i]) == 0 else v[i]) for k, v in metrics.items()} | {"genome": np.array(pop[i], dtype=float)}
+    return {k: (v[i].item() if np.ndim(v[i]) == 0 else v[i]) for k, v in metrics.items()} | {
+        "genome": np.array(pop[i], dtype=float)
+    }
 
 
 def _record(st: GAState, pop, metrics: dict) -> None:

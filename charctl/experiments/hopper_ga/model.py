@@ -42,8 +42,20 @@ INVALID = {
     1024: "hip angle beyond +-90 degrees (foot above the hip)",
     2048: "no periodic gait (touchdown speed does not repeat)",
 }
-HIP_GROUND, KNEE_LIMIT, NO_LIFTOFF, EARLY_LIFTOFF, T_NOT_REAL, T_RANGE, FOOT_GROUND, SWING_KNEE, BALANCE_LIMIT, BAD_GENE, HIP_RANGE, NO_PERIODIC = (
-    1, 2, 4, 8, 16, 32, 64, 128, 256, 512, 1024, 2048)
+(
+    HIP_GROUND,
+    KNEE_LIMIT,
+    NO_LIFTOFF,
+    EARLY_LIFTOFF,
+    T_NOT_REAL,
+    T_RANGE,
+    FOOT_GROUND,
+    SWING_KNEE,
+    BALANCE_LIMIT,
+    BAD_GENE,
+    HIP_RANGE,
+    NO_PERIODIC,
+) = (1, 2, 4, 8, 16, 32, 64, 128, 256, 512, 1024, 2048)
 
 
 def describe_invalid(code: int) -> str:
@@ -91,7 +103,9 @@ def gene_names(body: Body) -> list[str]:
 def settings_from_config(cfg, speed: float | None = None, beta: float | None = None) -> Settings:
     body = body_from_config(cfg.character)
     b = cfg.bounds
-    pairs = [b.l, b.kappa, b.theta0, b.m, b.alpha, b.swing_angle, b.swing_bend, b.swing_gain, b.bend_gain] + [b.eta] * body.num_dofs
+    pairs = [b.l, b.kappa, b.theta0, b.m, b.alpha, b.swing_angle, b.swing_bend, b.swing_gain, b.bend_gain] + [
+        b.eta
+    ] * body.num_dofs
     return Settings(
         speed=float(cfg.speed if speed is None else speed),
         beta=float(cfg.beta if beta is None else beta),
@@ -149,7 +163,7 @@ def decode(genomes: np.ndarray, s: Settings) -> Params:
     bad = ~np.all(finite & inside, axis=1)
     g = np.clip(np.where(finite, genomes, s.low), s.low, s.high)
     cols = [g[:, i] for i in range(len(GENE_BASE))]
-    return Params(*cols, eta=g[:, len(GENE_BASE):], bad=bad)
+    return Params(*cols, eta=g[:, len(GENE_BASE) :], bad=bad)
 
 
 # ---------------------------------------------------------------------------- leg geometry
@@ -190,7 +204,9 @@ def integrate_stance(l, kappa, theta0, m, xdot, h: float, g: float, vy0, max_ste
     at eq 1 with vertical speed vy0; stance lasts while d < l. Arguments are (N,) arrays
     (or scalars); failures (HIP below ground, knee over-folded, no lift-off) set `code` bits.
     """
-    l, kappa, theta0, m, xdot, vy0, d_min = np.broadcast_arrays(*(np.asarray(v, dtype=float) for v in (l, kappa, theta0, m, xdot, vy0, d_min)))
+    l, kappa, theta0, m, xdot, vy0, d_min = np.broadcast_arrays(
+        *(np.asarray(v, dtype=float) for v in (l, kappa, theta0, m, xdot, vy0, d_min))
+    )
     N = l.shape[0]
     x0, y0 = -l * np.sin(theta0), l * np.cos(theta0)
     xs = np.empty((N, max_steps + 1))
@@ -388,8 +404,21 @@ def leg_cycle(p: Params, s: Settings, xdot: np.ndarray | float | None = None) ->
     w = np.where(in_stance, 0.0, tau / T[:, None])
     target_x = w * foot_a_x  # idle foot at x = 0
     hip = np.stack([x, y], -1)
-    return Cycle(t=t, dt=dt, mask=mask, hip=hip, theta_c=theta_c, theta_l=theta_l, target_x=target_x, target_w=w,
-                 lift=lift, end=end, T=T, xdot=xdot, code=code)
+    return Cycle(
+        t=t,
+        dt=dt,
+        mask=mask,
+        hip=hip,
+        theta_c=theta_c,
+        theta_l=theta_l,
+        target_x=target_x,
+        target_w=w,
+        lift=lift,
+        end=end,
+        T=T,
+        xdot=xdot,
+        code=code,
+    )
 
 
 # ---------------------------------------------------------------------------- timeline of cycles
@@ -416,9 +445,20 @@ def single_cycle_timeline(c: Cycle, p: Params, s: Settings) -> Timeline:
     w = s.body.hip_half_width
     tz = w + (-w - w) * c.target_w  # right foot (+w) -> left foot (-w)
     support = np.where(c.target_w > 0, -1, 0)
-    return Timeline(t=c.t, dt=c.dt, mask=c.mask, xdot=np.broadcast_to(c.xdot[:, None], c.t.shape), hip=c.hip,
-                    theta_c=c.theta_c, theta_l=c.theta_l, target=np.stack([c.target_x, tz], -1), support=support,
-                    lift=c.lift, end=c.end, l=p.l)
+    return Timeline(
+        t=c.t,
+        dt=c.dt,
+        mask=c.mask,
+        xdot=np.broadcast_to(c.xdot[:, None], c.t.shape),
+        hip=c.hip,
+        theta_c=c.theta_c,
+        theta_l=c.theta_l,
+        target=np.stack([c.target_x, tz], -1),
+        support=support,
+        lift=c.lift,
+        end=c.end,
+        l=p.l,
+    )
 
 
 def repeat_cycles(cycles: list[Cycle], p: Params, s: Settings, first_right: bool = True) -> Timeline:
@@ -450,9 +490,20 @@ def repeat_cycles(cycles: list[Cycle], p: Params, s: Settings, first_right: bool
         t_off += c.t[0, n - 1]
     cat = lambda v: np.concatenate(v)[None]  # noqa: E731
     K = sum(len(v) for v in t_all)
-    return Timeline(t=cat(t_all), dt=cat(dt_all), mask=np.ones((1, K), dtype=bool), xdot=cat(xd_all), hip=cat(hip_all),
-                    theta_c=cat(tc_all), theta_l=cat(tl_all), target=cat(tar_all), support=cat(sup_all),
-                    lift=cycles[0].lift.copy(), end=np.array([K - 1]), l=p.l.copy())
+    return Timeline(
+        t=cat(t_all),
+        dt=cat(dt_all),
+        mask=np.ones((1, K), dtype=bool),
+        xdot=cat(xd_all),
+        hip=cat(hip_all),
+        theta_c=cat(tc_all),
+        theta_l=cat(tl_all),
+        target=cat(tar_all),
+        support=cat(sup_all),
+        lift=cycles[0].lift.copy(),
+        end=np.array([K - 1]),
+        l=p.l.copy(),
+    )
 
 
 # ---------------------------------------------------------------------------- geometry of the whole body
@@ -491,7 +542,11 @@ def lower_mass_moment(tl: Timeline, legs: LegPoints, s: Settings) -> np.ndarray:
     thigh_com = legs.hip + (body.thigh_com * a)[:, None, None, None] * legs.thigh_dir
     shank_com = legs.knee + (body.shank_com * b)[:, None, None, None] * legs.shank_dir
     pelvis = np.concatenate([tl.hip, np.zeros(tl.hip.shape[:-1] + (1,))], -1)
-    return body.pelvis_mass * pelvis + body.thigh_mass * (thigh_com[..., 0, :] + thigh_com[..., 1, :]) + body.shank_mass * (shank_com[..., 0, :] + shank_com[..., 1, :])
+    return (
+        body.pelvis_mass * pelvis
+        + body.thigh_mass * (thigh_com[..., 0, :] + thigh_com[..., 1, :])
+        + body.shank_mass * (shank_com[..., 0, :] + shank_com[..., 1, :])
+    )
 
 
 # ---------------------------------------------------------------------------- balance (eq 7-11)

@@ -54,14 +54,23 @@ def run_motion(genome: np.ndarray, s: Settings, cycles: int, limp_factor: float 
     limp = leg_cycle(p, s, xdot=s.speed * limp_factor) if limp_factor else normal
     for c, what in ((normal, f"{s.speed:g} m/s"), (limp, f"{s.speed * (limp_factor or 1):g} m/s (limp)")):
         if c.code[0]:
-            raise CharctlError(f"the genome's cycle at {what} is physically impossible: {describe_invalid(int(c.code[0]))}")
+            raise CharctlError(
+                f"the genome's cycle at {what} is physically impossible: {describe_invalid(int(c.code[0]))}"
+            )
     seq = [normal if i % 2 == 0 else limp for i in range(cycles)]
     tl = repeat_cycles(seq, p, s)
     r = _finish(p, tl, np.zeros(1, dtype=np.int64), s)
     root = np.concatenate([tl.hip[0], np.zeros((tl.hip.shape[1], 1))], -1)
     return Motion(
-        rollout=r, t=tl.t[0], root=root, upper=dof_to_joint_angles(r.balance.angles[0], s.body), legs=r.theta[0, :, :4],
-        com=r.balance.com[0], target=tl.target[0], support=tl.support[0], cycle_xdot=[float(c.xdot[0]) for c in seq],
+        rollout=r,
+        t=tl.t[0],
+        root=root,
+        upper=dof_to_joint_angles(r.balance.angles[0], s.body),
+        legs=r.theta[0, :, :4],
+        com=r.balance.com[0],
+        target=tl.target[0],
+        support=tl.support[0],
+        cycle_xdot=[float(c.xdot[0]) for c in seq],
     )
 
 
@@ -73,7 +82,11 @@ def cycles_for(seconds: float, cycle_time: float) -> int:
 def resample(m: Motion, fps: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Uniform frames (linear interpolation in time): t (T,), root (T,3), upper (T,J,2), legs (T,4)."""
     t = np.arange(0.0, m.t[-1] + 1e-9, 1.0 / fps)
-    lerp = lambda v: np.stack([np.interp(t, m.t, col) for col in v.reshape(len(m.t), -1).T], -1).reshape((len(t),) + v.shape[1:])  # noqa: E731
+
+    def lerp(v: np.ndarray) -> np.ndarray:
+        cols = [np.interp(t, m.t, col) for col in v.reshape(len(m.t), -1).T]
+        return np.stack(cols, -1).reshape((len(t),) + v.shape[1:])
+
     return t, lerp(m.root), lerp(m.upper), lerp(m.legs)
 
 
@@ -93,19 +106,43 @@ def skeleton(s: Settings, l: float) -> list[dict]:
     def add_upper(j: int, parent: str) -> None:
         name = body.names[j]
         leaf = not children[name]
-        joints.append({"name": name, "parent": parent, "offset": body.offset[j].copy(),
-                       "end": body.direction[j] * body.length[j] if leaf else None, "kind": "upper", "index": j,
-                       "segment": body.direction[j] * body.length[j]})
+        joints.append(
+            {
+                "name": name,
+                "parent": parent,
+                "offset": body.offset[j].copy(),
+                "end": body.direction[j] * body.length[j] if leaf else None,
+                "kind": "upper",
+                "index": j,
+                "segment": body.direction[j] * body.length[j],
+            }
+        )
         for c in children[name]:
             add_upper(c, name)
 
     for j in np.flatnonzero(body.parent < 0):
         add_upper(int(j), "root")
     for side, z in (("right", w), ("left", -w)):
-        joints.append({"name": f"{side}_hip", "parent": "root", "offset": np.array([0.0, 0.0, z]), "end": None, "kind": "hip",
-                       "segment": np.array([0.0, -a, 0.0])})
-        joints.append({"name": f"{side}_knee", "parent": f"{side}_hip", "offset": np.array([0.0, -a, 0.0]),
-                       "end": np.array([0.0, -b, 0.0]), "kind": "knee", "segment": np.array([0.0, -b, 0.0])})
+        joints.append(
+            {
+                "name": f"{side}_hip",
+                "parent": "root",
+                "offset": np.array([0.0, 0.0, z]),
+                "end": None,
+                "kind": "hip",
+                "segment": np.array([0.0, -a, 0.0]),
+            }
+        )
+        joints.append(
+            {
+                "name": f"{side}_knee",
+                "parent": f"{side}_hip",
+                "offset": np.array([0.0, -a, 0.0]),
+                "end": np.array([0.0, -b, 0.0]),
+                "kind": "knee",
+                "segment": np.array([0.0, -b, 0.0]),
+            }
+        )
     return joints
 
 
@@ -123,7 +160,9 @@ def joint_euler(joints: list[dict], upper: np.ndarray, legs: np.ndarray) -> np.n
 
 
 # ---------------------------------------------------------------------------- BVH
-def write_bvh(path: str | Path, s: Settings, l: float, fps: float, root: np.ndarray, upper: np.ndarray, legs: np.ndarray) -> Path:
+def write_bvh(
+    path: str | Path, s: Settings, l: float, fps: float, root: np.ndarray, upper: np.ndarray, legs: np.ndarray
+) -> Path:
     """Write the 11-joint character as BVH (same conventions as charctl.motion.bvh.write_bvh)."""
     joints = skeleton(s, l)
     kids = {j["name"]: [k for k in joints if k["parent"] == j["name"]] for j in joints}
@@ -143,7 +182,9 @@ def write_bvh(path: str | Path, s: Settings, l: float, fps: float, root: np.ndar
             emit(k, depth + 1)
         if j["end"] is not None:
             e = j["end"]
-            lines.extend([f"{pad}\tEnd Site", pad + "\t{", f"{pad}\t\tOFFSET {e[0]:.6f} {e[1]:.6f} {e[2]:.6f}", pad + "\t}"])
+            lines.extend(
+                [f"{pad}\tEnd Site", pad + "\t{", f"{pad}\t\tOFFSET {e[0]:.6f} {e[1]:.6f} {e[2]:.6f}", pad + "\t}"]
+            )
         lines.append(pad + "}")
 
     emit(joints[0], 0)
@@ -170,7 +211,7 @@ def mjcf(s: Settings, l: float) -> tuple[str, list[tuple[str, int, int]]]:
         out = [f'{pad}<body name="{j["name"]}" pos="{o[0]:.4f} {o[1]:.4f} {o[2]:.4f}">']
         axes = ("z", "x") if j["kind"] == "upper" else ("z",)
         for ax in axes:
-            name = f'{j["name"]}_{ax}'
+            name = f"{j['name']}_{ax}"
             hinges.append((name, index[j["name"]], 0 if ax == "z" else 1))
             vec = "0 0 1" if ax == "z" else "1 0 0"
             out.append(f'{pad}  <joint name="{name}" type="hinge" axis="{vec}" limited="false" armature="0.01"/>')
@@ -179,9 +220,15 @@ def mjcf(s: Settings, l: float) -> tuple[str, list[tuple[str, int, int]]]:
         r = _RADIUS.get(key, 0.045)
         rgba = "0.85 0.55 0.4 1" if j["name"].startswith("left") else "0.4 0.6 0.85 1"
         if j["name"] == "neck":
-            out.append(f'{pad}  <geom type="sphere" size="{r}" ' f'pos="{seg[0] * 0.6:.4f} {seg[1] * 0.6:.4f} {seg[2] * 0.6:.4f}" rgba="0.9 0.8 0.7 1"/>')
+            out.append(
+                f'{pad}  <geom type="sphere" size="{r}" '
+                f'pos="{seg[0] * 0.6:.4f} {seg[1] * 0.6:.4f} {seg[2] * 0.6:.4f}" rgba="0.9 0.8 0.7 1"/>'
+            )
         else:
-            out.append(f'{pad}  <geom type="capsule" size="{r}" ' f'fromto="0 0 0 {seg[0]:.4f} {seg[1]:.4f} {seg[2]:.4f}" rgba="{rgba}"/>')
+            out.append(
+                f'{pad}  <geom type="capsule" size="{r}" '
+                f'fromto="0 0 0 {seg[0]:.4f} {seg[1]:.4f} {seg[2]:.4f}" rgba="{rgba}"/>'
+            )
         for k in kids[j["name"]]:
             out += body_xml(k, depth + 1)
         out.append(f"{pad}</body>")
@@ -190,23 +237,28 @@ def mjcf(s: Settings, l: float) -> tuple[str, list[tuple[str, int, int]]]:
     root_kids = []
     for k in kids["root"]:
         root_kids += body_xml(k, 3)
-    xml = "\n".join([
-        '<mujoco model="hopper-ga">',
-        '  <visual><headlight ambient="0.45 0.45 0.45" ' 'diffuse="0.6 0.6 0.6"/><global offwidth="1280" offheight="720"/></visual>',
-        '  <asset><texture name="grid" type="2d" builtin="checker" ' 'rgb1="0.25 0.3 0.35" rgb2="0.35 0.4 0.45" width="256" height="256"/>',
-        '    <material name="grid" texture="grid" texrepeat="40 40"/></asset>',
-        "  <worldbody>",
-        '    <geom type="plane" size="100 100 0.1" euler="-90 0 0" pos="40 0 0" material="grid"/>',
-        '    <light pos="0 6 4" dir="0 -1 -0.6"/>',
-        '    <body name="pelvis" pos="0 1 0">',
-        "      <freejoint/>",
-        '      <camera name="side" mode="trackcom" pos="0.4 0.0 3.2" xyaxes="1 0 0 0 1 0"/>',
-        f'      <geom type="capsule" size="{_RADIUS["pelvis"]}" ' f'fromto="0 0 {-w:.4f} 0 0 {w:.4f}" rgba="0.5 0.5 0.55 1"/>',
-        *root_kids,
-        "    </body>",
-        "  </worldbody>",
-        "</mujoco>",
-    ])
+    xml = "\n".join(
+        [
+            '<mujoco model="hopper-ga">',
+            '  <visual><headlight ambient="0.45 0.45 0.45" '
+            'diffuse="0.6 0.6 0.6"/><global offwidth="1280" offheight="720"/></visual>',
+            '  <asset><texture name="grid" type="2d" builtin="checker" '
+            'rgb1="0.25 0.3 0.35" rgb2="0.35 0.4 0.45" width="256" height="256"/>',
+            '    <material name="grid" texture="grid" texrepeat="40 40"/></asset>',
+            "  <worldbody>",
+            '    <geom type="plane" size="100 100 0.1" euler="-90 0 0" pos="40 0 0" material="grid"/>',
+            '    <light pos="0 6 4" dir="0 -1 -0.6"/>',
+            '    <body name="pelvis" pos="0 1 0">',
+            "      <freejoint/>",
+            '      <camera name="side" mode="trackcom" pos="0.4 0.0 3.2" xyaxes="1 0 0 0 1 0"/>',
+            f'      <geom type="capsule" size="{_RADIUS["pelvis"]}" '
+            f'fromto="0 0 {-w:.4f} 0 0 {w:.4f}" rgba="0.5 0.5 0.55 1"/>',
+            *root_kids,
+            "    </body>",
+            "  </worldbody>",
+            "</mujoco>",
+        ]
+    )
     return xml, hinges
 
 
@@ -221,7 +273,9 @@ def qpos_sequence(model, hinges: list[tuple[str, int, int]], root: np.ndarray, e
     return q
 
 
-def write_video(path: str | Path, s: Settings, l: float, fps: float, root: np.ndarray, upper: np.ndarray, legs: np.ndarray) -> dict:
+def write_video(
+    path: str | Path, s: Settings, l: float, fps: float, root: np.ndarray, upper: np.ndarray, legs: np.ndarray
+) -> dict:
     """Render the run with the character's capsule bodies through charctl.viz.video.render_qpos."""
     import mujoco
 

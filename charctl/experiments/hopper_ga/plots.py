@@ -57,10 +57,19 @@ def limp(normal, limping, path: Path, title: str) -> Path:
     for ax, m, name in ((ax0, normal, "normal"), (ax1, limping, "limp (left leg)")):
         ax.plot(m.t, m.target[:, 1], "--", color="tab:red", label="target z")
         ax.plot(m.t, m.com[:, 2], "-", color="k", label="COM z")
-        ax.axhline(float(np.mean(m.com[:, 2])), color="tab:blue", lw=1, label=f"mean COM z = {np.mean(m.com[:, 2]) * 100:+.1f} cm")
+        ax.axhline(
+            float(np.mean(m.com[:, 2])),
+            color="tab:blue",
+            lw=1,
+            label=f"mean COM z = {np.mean(m.com[:, 2]) * 100:+.1f} cm",
+        )
         stance = m.support >= 0
-        ax.fill_between(m.t, -0.1, 0.1, where=stance & (m.support == 0), color="tab:blue", alpha=0.1, label="right stance")
-        ax.fill_between(m.t, -0.1, 0.1, where=stance & (m.support == 1), color="tab:orange", alpha=0.15, label="left stance")
+        ax.fill_between(
+            m.t, -0.1, 0.1, where=stance & (m.support == 0), color="tab:blue", alpha=0.1, label="right stance"
+        )
+        ax.fill_between(
+            m.t, -0.1, 0.1, where=stance & (m.support == 1), color="tab:orange", alpha=0.15, label="left stance"
+        )
         ax.set_ylabel("z (m, right +)")
         ax.set_title(name)
         ax.legend(loc="upper right", fontsize=7, ncol=3)
@@ -93,4 +102,3 @@ def strip(motion, s, l: float, path: Path, title: str, frames: int = 12) -> Path
     ax.set_xlabel("x (m)")
     ax.set_title(title)
     return save_figure(fig, path)
-

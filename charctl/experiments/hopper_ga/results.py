@@ -71,8 +71,10 @@ def limp_test(genome: np.ndarray, s: Settings, cycles: int, factor: float):
 def _tracking(m) -> dict:
     """RMS distance (m) between the actual and the target COM in the ground plane, and whether the
     balance joints stayed inside balance.angle_limit over the whole run."""
-    return {"com_tracking_rms_m": float(np.sqrt(np.mean(np.sum((m.com[:, [0, 2]] - m.target) ** 2, 1)))),
-            "balance_within_limits": bool(m.rollout.code[0] == 0)}
+    return {
+        "com_tracking_rms_m": float(np.sqrt(np.mean(np.sum((m.com[:, [0, 2]] - m.target) ** 2, 1)))),
+        "balance_within_limits": bool(m.rollout.code[0] == 0),
+    }
 
 
 def write_outputs(out: Path, history: dict, genome: np.ndarray, s: Settings, cfg, figures: bool = True) -> dict:
@@ -85,14 +87,25 @@ def write_outputs(out: Path, history: dict, genome: np.ndarray, s: Settings, cfg
     out.mkdir(parents=True, exist_ok=True)
     gait = gait_summary(genome, s)
     label = f"speed {s.speed:g} m/s, beta {s.beta:g}"
-    doc = {"speed": s.speed, "beta": s.beta, "generations": len(history["best"]) - 1, **gait, "genes": genome_dict(genome, s)}
+    doc = {
+        "speed": s.speed,
+        "beta": s.beta,
+        "generations": len(history["best"]) - 1,
+        **gait,
+        "genes": genome_dict(genome, s),
+    }
     atomic_write_text(out / "best_genome.json", json.dumps(doc, indent=2))
     normal, limping, limp_numbers = limp_test(genome, s, int(cfg.limp.cycles), float(cfg.limp.speed_factor))
     if figures:
         plots.fitness_curve(history, out / "fitness_curve.png", label)
         plots.com_path(normal, out / "com_path.png", f"{label}: target vs actual COM")
         if limping is not None:
-            plots.limp(normal, limping, out / "limp.png", f"{label}: left leg limps (HIP speed x{cfg.limp.speed_factor:g} on its stance)")
+            plots.limp(
+                normal,
+                limping,
+                out / "limp.png",
+                f"{label}: left leg limps (HIP speed x{cfg.limp.speed_factor:g} on its stance)",
+            )
         plots.strip(run_motion(genome, s, 2), s, genome[0], out / "strip.png", f"{label}: two steps")
     return {"gait": gait, "limp": limp_numbers}
 

@@ -78,19 +78,25 @@ class RayEvaluator:
         try:
             import ray
         except ImportError:
-            raise CharctlError("runtime.kind=ray needs Ray: pip install 'ray>=2.40' (or `pip install charctl[ray]`)") from None
+            raise CharctlError(
+                "runtime.kind=ray needs Ray: pip install 'ray>=2.40' (or `pip install charctl[ray]`)"
+            ) from None
         self.ray = ray
         self.workers = workers
         self.started = False
         if not ray.is_initialized():
-            kwargs = dict(include_dashboard=False, log_to_driver=False, ignore_reinit_error=True, configure_logging=False)
+            kwargs = dict(
+                include_dashboard=False, log_to_driver=False, ignore_reinit_error=True, configure_logging=False
+            )
             try:
                 if address:
                     ray.init(address=address, **kwargs)
                 else:
                     ray.init(num_cpus=workers, **kwargs)
             except Exception as exc:  # cannot reach the cluster, bad address ...
-                raise CharctlError(f"cannot start Ray (runtime.address={address!r}): {str(exc).splitlines()[0][:160]}") from None
+                raise CharctlError(
+                    f"cannot start Ray (runtime.address={address!r}): {str(exc).splitlines()[0][:160]}"
+                ) from None
             self.started = True
         self.remote = ray.remote(num_cpus=1)(_eval_chunk)
         self.settings_ref = ray.put(settings)

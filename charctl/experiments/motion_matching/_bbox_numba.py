@@ -62,6 +62,7 @@ def bbox_search(F, q, slo, shi, llo, lhi, clip, phase, period, cur_clip, cur_pha
     best_d, best_i = scan_large_box(F, q, slo, shi, first, clip, phase, period, cur_clip, cur_phase, window, BIG, -1)
     for lb in range(nl):
         if lb != first and bounds[lb] < best_d:
-            best_d, best_i = scan_large_box(F, q, slo, shi, lb, clip, phase, period, cur_clip, cur_phase, window,
-                                            best_d, best_i)
+            best_d, best_i = scan_large_box(
+                F, q, slo, shi, lb, clip, phase, period, cur_clip, cur_phase, window, best_d, best_i
+            )
     return best_i, best_d

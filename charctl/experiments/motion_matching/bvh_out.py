@@ -39,7 +39,9 @@ def write_user_bvh(template, root_pos: np.ndarray, local_rot: np.ndarray, path: 
             emit(c, depth + 1)
         if j in template.end_sites:
             e = template.end_sites[j]
-            lines.extend([f"{pad}\tEnd Site", pad + "\t{", f"{pad}\t\tOFFSET {e[0]:.6f} {e[1]:.6f} {e[2]:.6f}", pad + "\t}"])
+            lines.extend(
+                [f"{pad}\tEnd Site", pad + "\t{", f"{pad}\t\tOFFSET {e[0]:.6f} {e[1]:.6f} {e[2]:.6f}", pad + "\t}"]
+            )
         lines.append(pad + "}")
 
     for root in [j for j in range(J) if template.parents[j] < 0]:
@@ -50,7 +52,9 @@ def write_user_bvh(template, root_pos: np.ndarray, local_rot: np.ndarray, path: 
         pos_src = root_pos if template.parents[j] < 0 else np.broadcast_to(template.offsets[j], (T, 3))
         rot_axes = "".join(c[0].upper() for c in ch if c.endswith("rotation"))
         if rot_axes and len(rot_axes) != 3:
-            raise CharctlError(f"BVH export: joint {template.names[j]!r} has {len(rot_axes)} rotation channels (only 3 are supported)")
+            raise CharctlError(
+                f"BVH export: joint {template.names[j]!r} has {len(rot_axes)} rotation channels (only 3 are supported)"
+            )
         euler = Rotation.from_quat(local_rot[:, j]).as_euler(rot_axes, degrees=True) if rot_axes else None
         k = 0
         for c in ch:

@@ -15,8 +15,13 @@ from charctl.errors import CharctlError
 NAME = "motion-matching"
 
 DEFAULT_CLIPS = [
-    "walker/walk_forward", "walker/turn_left0", "walker/turn_left1", "walker/turn_right0",
-    "walker/turn_right1", "walk", "run",
+    "walker/walk_forward",
+    "walker/turn_left0",
+    "walker/turn_left1",
+    "walker/turn_right0",
+    "walker/turn_right1",
+    "walk",
+    "run",
 ]
 
 

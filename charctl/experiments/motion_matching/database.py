@@ -133,20 +133,36 @@ def build_database(cfg, sources: list[SourceMotion] | None = None, info: Skeleto
     searchable = cat.pop("searchable")
     search_rows = np.flatnonzero(searchable & cat["valid"])
     if search_rows.size < 2:
-        raise CharctlError(f"the database has {search_rows.size} searchable frames: clips are shorter than the "
-                           "feature horizon (lower features.future_samples/spacing or add longer clips)")
+        raise CharctlError(
+            f"the database has {search_rows.size} searchable frames: clips are shorter than the "
+            "feature horizon (lower features.future_samples/spacing or add longer clips)"
+        )
     block_names, block_dims = zip(*per_clip[0]["blocks"])
     raw = cat.pop("raw")
     layout = _layout(raw[search_rows], block_names, block_dims, cfg, fut, past)
     feats = np.where(cat["valid"][:, None], layout.normalise(raw), 0.0)
     return Database(
-        fps=sources[0].fps, skeleton=info, clip_names=[s.name for s in sources],
-        clip_id=np.repeat(np.arange(len(sources)), lengths), clip_start=starts, clip_stop=stops,
-        clip_period=np.array([s.period for s in sources]), phase=cat["phase"], ground=cat["ground"],
-        heading=cat["heading"], height=cat["height"], step_local=cat["step_local"],
-        step_heading=cat["step_heading"], pose=cat["pose"], pose_vel=cat["pose_vel"],
-        height_vel=cat["height_vel"], raw=raw, features=np.ascontiguousarray(feats),
-        valid=cat["valid"], search_rows=search_rows, layout=layout,
+        fps=sources[0].fps,
+        skeleton=info,
+        clip_names=[s.name for s in sources],
+        clip_id=np.repeat(np.arange(len(sources)), lengths),
+        clip_start=starts,
+        clip_stop=stops,
+        clip_period=np.array([s.period for s in sources]),
+        phase=cat["phase"],
+        ground=cat["ground"],
+        heading=cat["heading"],
+        height=cat["height"],
+        step_local=cat["step_local"],
+        step_heading=cat["step_heading"],
+        pose=cat["pose"],
+        pose_vel=cat["pose_vel"],
+        height_vel=cat["height_vel"],
+        raw=raw,
+        features=np.ascontiguousarray(feats),
+        valid=cat["valid"],
+        search_rows=search_rows,
+        layout=layout,
         exclude_window=paper_frames(cfg.runtime.exclude_window, cfg),
     )
 
@@ -202,10 +218,18 @@ def _clip_arrays(s: SourceMotion, info: SkeletonInfo, cfg, fut: np.ndarray, past
     fwd = R.log_map(R.multiply(pose[1:], R.conjugate(pose[:-1]))) * fps
     pose_vel = np.concatenate([fwd[:1], 0.5 * (fwd[1:] + fwd[:-1]), fwd[-1:]]) if T > 2 else np.concatenate([fwd, fwd])
     return {
-        "ground": ground, "heading": heading, "height": s.root_pos[:, 1].copy(), "step_local": step_local,
-        "step_heading": step_heading, "pose": pose, "pose_vel": pose_vel,
-        "height_vel": np.gradient(s.root_pos[:, 1], 1.0 / fps), "phase": phase, "valid": valid,
-        "searchable": searchable, "raw": np.concatenate([b for _, b in blocks], axis=1),
+        "ground": ground,
+        "heading": heading,
+        "height": s.root_pos[:, 1].copy(),
+        "step_local": step_local,
+        "step_heading": step_heading,
+        "pose": pose,
+        "pose_vel": pose_vel,
+        "height_vel": np.gradient(s.root_pos[:, 1], 1.0 / fps),
+        "phase": phase,
+        "valid": valid,
+        "searchable": searchable,
+        "raw": np.concatenate([b for _, b in blocks], axis=1),
         "blocks": [(n, b.shape[1]) for n, b in blocks],
     }
 
@@ -241,14 +265,17 @@ def _layout(raw_search: np.ndarray, names, dims, cfg, fut: np.ndarray, past: np.
     n = fut.size
     disc = f.discount ** np.arange(n)  # gamma^(i-1), i = 1..n
     weights = {
-        "root_height": np.full(1, f.pose_weight), "root_tilt": np.full(2, f.pose_weight),
-        "future_pos": np.repeat(f.position_weight * disc, 2), "future_vel": np.repeat(f.velocity_weight * disc, 2),
-        "future_dir": np.repeat(f.direction_weight * disc, 2), "past_pos": np.full(2 * past.size, f.past_weight),
+        "root_height": np.full(1, f.pose_weight),
+        "root_tilt": np.full(2, f.pose_weight),
+        "future_pos": np.repeat(f.position_weight * disc, 2),
+        "future_vel": np.repeat(f.velocity_weight * disc, 2),
+        "future_dir": np.repeat(f.direction_weight * disc, 2),
+        "past_pos": np.full(2 * past.size, f.past_weight),
     }
     blocks, mean, scale, sqrt_w = {}, [], [], []
     col = 0
     for name, d in zip(names, dims):
-        x = raw_search[:, col:col + d]
+        x = raw_search[:, col : col + d]
         blocks[name] = slice(col, col + d)
         mean.append(x.mean(axis=0))
         s = float(x.std(axis=0).mean())
@@ -256,4 +283,6 @@ def _layout(raw_search: np.ndarray, names, dims, cfg, fut: np.ndarray, past: np.
         sqrt_w.append(np.sqrt(weights.get(name, np.full(d, f.pose_weight))))
         col += d
     pose_dims = sum(d for nme, d in zip(names, dims) if nme in POSE_BLOCKS)
-    return FeatureLayout(blocks, np.concatenate(mean), np.concatenate(scale), np.concatenate(sqrt_w), fut, past, pose_dims)
+    return FeatureLayout(
+        blocks, np.concatenate(mean), np.concatenate(scale), np.concatenate(sqrt_w), fut, past, pose_dims
+    )

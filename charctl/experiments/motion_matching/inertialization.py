@@ -40,7 +40,12 @@ def apply_rotation_offset(offset: np.ndarray, q: np.ndarray) -> np.ndarray:
 
 
 def inertialize_segment(
-    x_src: np.ndarray, v_src: np.ndarray, x_dst: np.ndarray, v_dst0: np.ndarray, halflife: float, dt: float,
+    x_src: np.ndarray,
+    v_src: np.ndarray,
+    x_dst: np.ndarray,
+    v_dst0: np.ndarray,
+    halflife: float,
+    dt: float,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Blend a jump in a vector signal: output frames after a transition.
 

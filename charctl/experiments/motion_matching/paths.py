@@ -61,10 +61,10 @@ class TargetPath:
         a, d, L = self.points[:-1], self.dirs, self.seg_len
         out = np.empty(p.shape[0])
         for k in range(0, p.shape[0], chunk):  # chunks bound memory at N x K
-            q = p[k:k + chunk, None, :] - a[None]
+            q = p[k : k + chunk, None, :] - a[None]
             u = np.clip(np.einsum("nki,ki->nk", q, d), 0.0, L)
             r = q - u[..., None] * d[None]
-            out[k:k + chunk] = np.sqrt(np.einsum("nki,nki->nk", r, r).min(axis=1))
+            out[k : k + chunk] = np.sqrt(np.einsum("nki,nki->nk", r, r).min(axis=1))
         return out
 
 
@@ -176,8 +176,10 @@ def path_errors(path: TargetPath, ground: np.ndarray, speed: float, dt: float) -
     e = frame_errors(path, ground, speed, dt)
     e_time, e_near = e["e_time"], e["e_near"]
     return {
-        "e_time_mean": float(e_time.mean()), "e_time_std": float(e_time.std()),
-        "e_near_mean": float(e_near.mean()), "e_near_std": float(e_near.std()),
+        "e_time_mean": float(e_time.mean()),
+        "e_time_std": float(e_time.std()),
+        "e_near_mean": float(e_near.mean()),
+        "e_near_std": float(e_near.std()),
     }
 
 

@@ -122,7 +122,12 @@ def shift_start(db: Database, frame: int, shift: float) -> int:
 
 
 def run_path(
-    db: Database, index, path: TargetPath, cfg, with_pose: bool = True, seconds: float | None = None,
+    db: Database,
+    index,
+    path: TargetPath,
+    cfg,
+    with_pose: bool = True,
+    seconds: float | None = None,
     start_shift: float = 0.0,
 ) -> Rollout:
     """Follow `path` with motion matching; `with_pose=False` skips the pose blend (sweep speed).
@@ -170,8 +175,8 @@ def run_path(
         n = int(min(interval, T - 1 - t, stop - best))
         seg = np.arange(best, best + n)  # frames stepped from; frames best+1 .. best+n are shown
         steps, dh = blend.segment(cur, best, n)
-        ground[t + 1:t + n + 1], heading[t + 1:t + n + 1] = accumulate_root(ground[t], heading[t], steps, dh)
-        frames[t + 1:t + n + 1] = seg + 1
+        ground[t + 1 : t + n + 1], heading[t + 1 : t + n + 1] = accumulate_root(ground[t], heading[t], steps, dh)
+        frames[t + 1 : t + n + 1] = seg + 1
         t += n
         cur = best + n
     out = Rollout(db.fps, ground, heading, frames, searches, jumps, t_search)
@@ -206,8 +211,8 @@ class PoseBlend:
         # rate of change of the per-frame steps, over +-2 frames (the steps of a resampled clip are piecewise
         # constant, so a one-frame difference is a train of spikes)
         self.motion_vel = _smooth_rate(self.motion, 1.0 / db.fps) if root else None
-        self.poses: list[np.ndarray] = [db.pose[start:start + 1]]
-        self.heights: list[np.ndarray] = [db.height[start:start + 1]]
+        self.poses: list[np.ndarray] = [db.pose[start : start + 1]]
+        self.heights: list[np.ndarray] = [db.height[start : start + 1]]
 
     def segment(self, cur: int, best: int, n: int) -> tuple[np.ndarray, np.ndarray]:
         """Play frames best+1..best+n after showing frame `cur`; returns root steps (n, 2) and dheading (n,)."""

@@ -104,9 +104,20 @@ class BBoxIndex:
         self.kernel = _bbox_kernel()
 
     def query(self, q: np.ndarray, clip: int = -1, phase: float = 0.0) -> tuple[int, float]:
-        i, d = self.kernel(self.feats, np.ascontiguousarray(q, dtype=float), self.small_lo, self.small_hi,
-                           self.large_lo, self.large_hi, self.clip, self.phase, self.period, int(clip), float(phase),
-                           self.info.window)
+        i, d = self.kernel(
+            self.feats,
+            np.ascontiguousarray(q, dtype=float),
+            self.small_lo,
+            self.small_hi,
+            self.large_lo,
+            self.large_hi,
+            self.clip,
+            self.phase,
+            self.period,
+            int(clip),
+            float(phase),
+            self.info.window,
+        )
         if i < 0:
             raise RuntimeError("every searchable frame is excluded")
         return int(i), float(d)

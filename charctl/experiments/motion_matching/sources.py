@@ -66,7 +66,9 @@ def humanoid_sources(cfg) -> tuple[list[SourceMotion], SkeletonInfo]:
             raise CharctlError(f"clip {name!r} has only {clip.num_frames} frames")
         sources.append(_humanoid_source(clip, cfg.data))
     info = SkeletonInfo(
-        kind="humanoid", joint_names=list(BODY_NAMES), forward=np.array([1.0, 0.0, 0.0]),
+        kind="humanoid",
+        joint_names=list(BODY_NAMES),
+        forward=np.array([1.0, 0.0, 0.0]),
         end_joints=[BODY_NAMES.index(e) for e in cfg.features.end_points],
     )
     return sources, info
@@ -120,7 +122,9 @@ def close_loop(root_pos: np.ndarray, local_rot: np.ndarray, forward: np.ndarray)
     return pos, R.normalize(rot)
 
 
-def unroll_loop(root_pos: np.ndarray, local_rot: np.ndarray, before: int, after: int, forward: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def unroll_loop(
+    root_pos: np.ndarray, local_rot: np.ndarray, before: int, after: int, forward: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
     """Repeat a loop (last frame = next cycle's first) `before` cycles back and `after` forward.
 
     Cycle c is the base cycle moved by A^c, where A maps the first frame's ground frame onto the
@@ -179,8 +183,9 @@ def bvh_sources(cfg) -> tuple[list[SourceMotion], SkeletonInfo]:
         sources.append(SourceMotion(f.stem, fps, pos[:, 0].copy(), rot, pos, 0, pos.shape[0]))
     forward = _bvh_forward(cfg.data.bvh_forward, sources)
     ends = _bvh_end_joints(cfg.data.bvh_end_joints, first, sources[0].joint_pos)
-    info = SkeletonInfo(kind="bvh", joint_names=list(first.names), forward=forward, end_joints=ends,
-                        bvh_template=first, bvh_scale=scale)
+    info = SkeletonInfo(
+        kind="bvh", joint_names=list(first.names), forward=forward, end_joints=ends, bvh_template=first, bvh_scale=scale
+    )
     return sources, info
 
 
@@ -244,7 +249,9 @@ def _bvh_end_joints(names: list[str], motion, joint_pos: np.ndarray) -> list[int
     if names:
         missing = [n for n in names if n not in motion.names]
         if missing:
-            raise CharctlError(f"data.bvh_end_joints: no joint {missing[0]!r} in the BVH; joints: {', '.join(motion.names)}")
+            raise CharctlError(
+                f"data.bvh_end_joints: no joint {missing[0]!r} in the BVH; joints: {', '.join(motion.names)}"
+            )
         return [motion.names.index(n) for n in names]
     leaves = [j for j in range(len(motion.names)) if j not in set(motion.parents.tolist())]
     heights = joint_pos[:, leaves, 1].mean(axis=0)

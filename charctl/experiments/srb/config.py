@@ -18,7 +18,9 @@ class BodyConfig:
     """The single rigid body (paper §4)."""
 
     mass: float = 60.0  # kg, paper §4
-    inertia_pose_frame: int = 0  # frame of the reference clip whose composite inertia (pelvis frame) is scaled to `mass`
+    inertia_pose_frame: int = (
+        0  # frame of the reference clip whose composite inertia (pelvis frame) is scaled to `mass`
+    )
     friction: float = 1.0  # Coulomb mu of the linearised cone (decision: the MuJoCo humanoid's floor friction)
 
 
@@ -40,7 +42,9 @@ class TrackingConfig:
     kd: float = 35.0  # b, paper §7
     acc_min: float = -400.0  # min, paper §7
     acc_max: float = 400.0  # max, paper §7
-    w_linear: float = 1.0  # W entries of the 3 linear COM accelerations (decision, see docs: the text's "1-6" is garbled)
+    w_linear: float = (
+        1.0  # W entries of the 3 linear COM accelerations (decision, see docs: the text's "1-6" is garbled)
+    )
     w_angular: float = 1.0  # W entries of the 3 angular accelerations
     force_reg: float = 1e-6  # weight of ||lambda / m||^2 (m/s^2)^2: keeps the QP strictly convex
     torque_limit: float = 30.0  # N m per axis of the free body torque tau (0 = contact forces only; decision)
@@ -68,8 +72,12 @@ class TouchdownConfig:
     late_margin: float = 0.0  # m: late when y_srb > y_ref + margin at a scheduled touch-down -> the reference waits
     max_delay: int = 6  # frames the reference may wait for one touch-down (decision; the paper gives none)
     early_margin: float = 0.03  # m: early when y_srb < (ref pelvis height at touch-down) - margin during swing
-    early_min_swing: float = 0.5  # early touch-down only in the last half of a swing (decision: no jump right after lift-off)
-    zero_vertical_velocity: bool = True  # early touch-down: "set the COM y to 0" read as the downward velocity (decision)
+    early_min_swing: float = (
+        0.5  # early touch-down only in the last half of a swing (decision: no jump right after lift-off)
+    )
+    zero_vertical_velocity: bool = (
+        True  # early touch-down: "set the COM y to 0" read as the downward velocity (decision)
+    )
 
 
 @dataclass
@@ -100,18 +108,28 @@ class PushConfig:
     """Push-robustness protocol (paper §9, Table 1). See push.PushCase for the exact semantics."""
 
     forces: list[float] = field(default_factory=lambda: [float(f) for f in range(100, 1600, 100)])  # N, "impulse" cells
-    impulse_duration: float = 0.2  # s a "100 N impulse" is held (decision, docs/srb.md: 0.2 s reconciles paper §9 with Table 1)
+    impulse_duration: float = (
+        0.2  # s a "100 N impulse" is held (decision, docs/srb.md: 0.2 s reconciles paper §9 with Table 1)
+    )
     sustained_force: float = 100.0  # N, Table 1
     durations: list[float] = field(default_factory=lambda: [0.01, 0.1, 0.2, 0.3, 0.4, 1.0])  # s, Table 1
-    directions: list[float] = field(default_factory=lambda: [0.0, 90.0, 180.0, 270.0])  # deg in the heading frame, 0 = forward, 90 = left
-    phases: list[float] = field(default_factory=lambda: [0.0, 0.25, 0.5, 0.75])  # gait phase in [0, 1) of the push onset
+    directions: list[float] = field(
+        default_factory=lambda: [0.0, 90.0, 180.0, 270.0]
+    )  # deg in the heading frame, 0 = forward, 90 = left
+    phases: list[float] = field(
+        default_factory=lambda: [0.0, 0.25, 0.5, 0.75]
+    )  # gait phase in [0, 1) of the push onset
     trials: int = 5  # K trials per cell (CLI -k overrides)
     settle: float = 1.0  # s of unperturbed walking before the push window
     observe: float = 2.0  # s after the push ends the character must stay up
     init_noise: float = 0.05  # SRB trials: std of the initial COM velocity perturbation (m/s and rad/s)
     survive_rate: float = 0.5  # "largest survived force": the largest force whose survival rate is >= this
-    zero_action_column: bool = True  # also run the protocol with zero actions: what the QP tracker does without the policy
-    baseline_run: str = ""  # cgail run directory for the full-body column, or "auto" = the latest AMP walk run under output_root
+    zero_action_column: bool = (
+        True  # also run the protocol with zero actions: what the QP tracker does without the policy
+    )
+    baseline_run: str = (
+        ""  # cgail run directory for the full-body column, or "auto" = the latest AMP walk run under output_root
+    )
 
 
 @dataclass
@@ -128,7 +146,9 @@ def default_ppo() -> PPOConfig:
     lr 1e-4; lambda 0.95 and eps 0.2 are also the paper's and PPOConfig's defaults. Decisions (paper
     silent, docs/srb.md): a fixed Gaussian std of 0.3 policy units; 5 epochs, value weight 0.5 and
     grad-norm 1 as PPOConfig."""
-    return PPOConfig(lr=1e-4, gamma=0.995, minibatch_size=256, hidden=[64, 64, 64, 64], activation="tanh", action_std=0.3)
+    return PPOConfig(
+        lr=1e-4, gamma=0.995, minibatch_size=256, hidden=[64, 64, 64, 64], activation="tanh", action_std=0.3
+    )
 
 
 @dataclass

@@ -113,21 +113,47 @@ class EnvParams:
     @classmethod
     def from_cfg(cls, cfg) -> EnvParams:
         t, a, td, r, term = cfg.tracking, cfg.action, cfg.touchdown, cfg.reward, cfg.termination
-        return cls(kp=float(t.kp), kd=float(t.kd), acc_min=float(t.acc_min), acc_max=float(t.acc_max), substeps=int(t.substeps),
-                   solver=str(t.solver), foot_mode=str(a.foot_mode), foot_offset=float(a.foot_offset), td_enabled=bool(td.enabled),
-                   late_margin=float(td.late_margin), max_delay=int(td.max_delay), early_margin=float(td.early_margin),
-                   early_min_swing=float(td.early_min_swing), zero_vertical_velocity=bool(td.zero_vertical_velocity),
-                   w_stand=float(r.w_stand), w_mimic=float(r.w_mimic), k_disp=float(r.k_disp), k_rot=float(r.k_rot),
-                   k_ee=float(r.k_ee), k_vel=float(r.k_vel), max_height=float(term.max_height),
-                   min_height_ratio=float(term.min_height_ratio), min_height_abs=float(term.min_height_abs),
-                   max_tilt=float(np.radians(term.max_tilt_deg)))
+        return cls(
+            kp=float(t.kp),
+            kd=float(t.kd),
+            acc_min=float(t.acc_min),
+            acc_max=float(t.acc_max),
+            substeps=int(t.substeps),
+            solver=str(t.solver),
+            foot_mode=str(a.foot_mode),
+            foot_offset=float(a.foot_offset),
+            td_enabled=bool(td.enabled),
+            late_margin=float(td.late_margin),
+            max_delay=int(td.max_delay),
+            early_margin=float(td.early_margin),
+            early_min_swing=float(td.early_min_swing),
+            zero_vertical_velocity=bool(td.zero_vertical_velocity),
+            w_stand=float(r.w_stand),
+            w_mimic=float(r.w_mimic),
+            k_disp=float(r.k_disp),
+            k_rot=float(r.k_rot),
+            k_ee=float(r.k_ee),
+            k_vel=float(r.k_vel),
+            max_height=float(term.max_height),
+            min_height_ratio=float(term.min_height_ratio),
+            min_height_abs=float(term.min_height_abs),
+            max_tilt=float(np.radians(term.max_tilt_deg)),
+        )
 
 
 class SRBEnv:
     """N single-rigid-body walkers tracking one reference. All arrays are (N, ...) numpy."""
 
-    def __init__(self, cfg, num_envs: int, seed: int = 0, reference: Reference | None = None, body: Body | None = None,
-                 auto_reset: bool = True, max_steps: int | None = None):
+    def __init__(
+        self,
+        cfg,
+        num_envs: int,
+        seed: int = 0,
+        reference: Reference | None = None,
+        body: Body | None = None,
+        auto_reset: bool = True,
+        max_steps: int | None = None,
+    ):
         from charctl.motion.library import load_clip
 
         clip = None
@@ -143,8 +169,15 @@ class SRBEnv:
         self.max_steps = int(max_steps if max_steps is not None else cfg.termination.max_steps)
         self.dt = self.ref.dt
         t = cfg.tracking
-        self.qp = QPParams(mass=self.body.mass, mu=float(cfg.body.friction), w_linear=float(t.w_linear), w_angular=float(t.w_angular),
-                           force_reg=float(t.force_reg), torque_limit=float(t.torque_limit), torque_reg=float(t.torque_reg))
+        self.qp = QPParams(
+            mass=self.body.mass,
+            mu=float(cfg.body.friction),
+            w_linear=float(t.w_linear),
+            w_angular=float(t.w_angular),
+            force_reg=float(t.force_reg),
+            torque_limit=float(t.torque_limit),
+            torque_reg=float(t.torque_reg),
+        )
         a = cfg.action
         self.action_scale = np.array([a.foot_scale] * 4 + [a.lin_vel_scale] * 3 + [a.ang_vel_scale] * 3, dtype=float)
         n = num_envs
@@ -177,7 +210,9 @@ class SRBEnv:
         self.steps[idx] = 0
         self.delay[idx] = 0
         k, i = self.ref.split(frames)
-        self.foot_pos[idx] = F.rotate_yaw(self.ref.cycle_yaws[k], self.ref.foot_mid[i]) + self.ref.cycle_shifts[k][:, None, :]
+        self.foot_pos[idx] = (
+            F.rotate_yaw(self.ref.cycle_yaws[k], self.ref.foot_mid[i]) + self.ref.cycle_shifts[k][:, None, :]
+        )
         self.foot_yaw[idx] = self.ref.foot_yaw[i] + self.ref.cycle_yaws[k][:, None]
         self.stance[idx] = self.ref.stance[i]
         self.episode_return[idx] = 0.0
@@ -202,7 +237,9 @@ class SRBEnv:
     def contact_points(self) -> np.ndarray:
         """(N, 4, 3) world contact points [right heel, right toe, left heel, left toe] on the ground."""
         h = self.body.foot_half_length
-        fwd = np.stack([np.cos(self.foot_yaw), np.zeros_like(self.foot_yaw), -np.sin(self.foot_yaw)], axis=-1)  # (N, 2, 3)
+        fwd = np.stack(
+            [np.cos(self.foot_yaw), np.zeros_like(self.foot_yaw), -np.sin(self.foot_yaw)], axis=-1
+        )  # (N, 2, 3)
         pts = np.stack([self.foot_pos - h * fwd, self.foot_pos + h * fwd], axis=2)  # (N, 2, 2, 3)
         pts[..., 1] = 0.0
         return pts.reshape(self.num_envs, N_POINTS, 3)
@@ -243,9 +280,18 @@ class SRBEnv:
         m = F.to_matrix(self.rot)
         return m @ self.body.inertia @ m.transpose(0, 2, 1)
 
-    def advance_body(self, acc_des: np.ndarray, points: np.ndarray, active: np.ndarray, push: np.ndarray | None, h: float) -> dict:
+    def advance_body(
+        self, acc_des: np.ndarray, points: np.ndarray, active: np.ndarray, push: np.ndarray | None, h: float
+    ) -> dict:
         """One QP solve and one semi-implicit Euler step of length h (s). `push` (N, 3) N, world."""
-        batch = QPBatch(points=points, active=active, com=self.pos, inertia=self.world_inertia(), ang_vel=self.ang_vel, acc_des=acc_des)
+        batch = QPBatch(
+            points=points,
+            active=active,
+            com=self.pos,
+            inertia=self.world_inertia(),
+            ang_vel=self.ang_vel,
+            acc_des=acc_des,
+        )
         out = solve_batch(batch, self.qp, self.p.solver)
         lin = out["qdd"][:, :3] if push is None else out["qdd"][:, :3] + push / self.body.mass
         self.vel += h * lin
@@ -326,7 +372,9 @@ class SRBEnv:
         return {"pose": pose, "ee": ee, "vel": vel}
 
     # ------------------------------------------------------------------ step
-    def step(self, action: np.ndarray, push: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict]:
+    def step(
+        self, action: np.ndarray, push: np.ndarray | None = None
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict]:
         """Advance all environments one control step.
 
         `action` (N, 10) policy units; `push` (N, 3) world force (N) held over the step, unknown to

@@ -96,8 +96,14 @@ def make_cases(push_cfg) -> list[PushCase]:
     common = dict(settle_s=float(p.settle), observe_s=float(p.observe))
     grid = [(float(d), float(ph)) for d in p.directions for ph in p.phases]
     cases = [PushCase("control", 0.0, float(p.impulse_duration), d, ph, **common) for d, ph in grid]
-    cases += [PushCase("impulse", float(f), float(p.impulse_duration), d, ph, **common) for f in p.forces for d, ph in grid]
-    cases += [PushCase("sustained", float(p.sustained_force), float(t), d, ph, **common) for t in p.durations for d, ph in grid]
+    cases += [
+        PushCase("impulse", float(f), float(p.impulse_duration), d, ph, **common) for f in p.forces for d, ph in grid
+    ]
+    cases += [
+        PushCase("sustained", float(p.sustained_force), float(t), d, ph, **common)
+        for t in p.durations
+        for d, ph in grid
+    ]
     return cases
 
 
@@ -105,8 +111,15 @@ SimulateCase = Callable[[PushCase, int], bool]
 SimulateBatch = Callable[[list[tuple[PushCase, int]]], list[bool]]
 
 
-def run_push_study(simulate_case: SimulateCase | None, cases: Sequence[PushCase], trials: int, seed: int = 0,
-                   simulate_batch: SimulateBatch | None = None, label: str = "", progress: bool = True) -> PushTable:
+def run_push_study(
+    simulate_case: SimulateCase | None,
+    cases: Sequence[PushCase],
+    trials: int,
+    seed: int = 0,
+    simulate_batch: SimulateBatch | None = None,
+    label: str = "",
+    progress: bool = True,
+) -> PushTable:
     """Run K = `trials` trials of every case; trial k uses seed `seed + k` for every case (paired trials).
 
     Give `simulate_case` (called once per case and trial) or `simulate_batch` (called once with
@@ -146,8 +159,16 @@ class PushTable:
         rows = []
         for (kind, force, dur), idx in groups.items():
             o = self.outcomes[idx]
-            rows.append({"kind": kind, "force_n": force, "duration_s": dur, "impulse_ns": force * dur,
-                         "survival": float(o.mean()), "trials": int(o.size)})
+            rows.append(
+                {
+                    "kind": kind,
+                    "force_n": force,
+                    "duration_s": dur,
+                    "impulse_ns": force * dur,
+                    "survival": float(o.mean()),
+                    "trials": int(o.size),
+                }
+            )
         return rows
 
     def by_direction(self) -> list[dict]:
@@ -155,8 +176,10 @@ class PushTable:
         groups: dict[tuple, list[int]] = {}
         for i, c in enumerate(self.cases):
             groups.setdefault((c.kind, c.force_n, c.duration_s, c.direction_deg), []).append(i)
-        return [{"kind": k, "force_n": f, "duration_s": d, "direction_deg": a, "survival": float(self.outcomes[idx].mean())}
-                for (k, f, d, a), idx in groups.items()]
+        return [
+            {"kind": k, "force_n": f, "duration_s": d, "direction_deg": a, "survival": float(self.outcomes[idx].mean())}
+            for (k, f, d, a), idx in groups.items()
+        ]
 
     def survival(self, kind: str, force: float, duration: float) -> float:
         for r in self.cells():
@@ -171,16 +194,28 @@ class PushTable:
         ok = [r["force_n"] for r in imp if r["survival"] >= rate]
         full = [r["force_n"] for r in imp if r["survival"] >= 1.0]
         fails = [r["force_n"] for r in imp if r["survival"] < 1.0]
-        return {"largest_force_rate": max(ok) if ok else None, "rate": rate, "largest_force_all_survived": max(full) if full else None,
-                "first_force_with_fall": min(fails) if fails else None}
+        return {
+            "largest_force_rate": max(ok) if ok else None,
+            "rate": rate,
+            "largest_force_all_survived": max(full) if full else None,
+            "first_force_with_fall": min(fails) if fails else None,
+        }
 
     def to_dict(self) -> dict:
-        return {"label": self.label, "cases": [asdict(c) for c in self.cases], "outcomes": self.outcomes.astype(int).tolist(),
-                "cells": self.cells(), "by_direction": self.by_direction(), "meta": self.meta}
+        return {
+            "label": self.label,
+            "cases": [asdict(c) for c in self.cases],
+            "outcomes": self.outcomes.astype(int).tolist(),
+            "cells": self.cells(),
+            "by_direction": self.by_direction(),
+            "meta": self.meta,
+        }
 
 
 # ---------------------------------------------------------------------------- reporting
-def comparison_markdown(tables: Sequence[PushTable | None], labels: Sequence[str], rate: float = 0.5, missing_note: str = "") -> str:
+def comparison_markdown(
+    tables: Sequence[PushTable | None], labels: Sequence[str], rate: float = 0.5, missing_note: str = ""
+) -> str:
     """Markdown: one row per cell, one survival column per simulator (— where a table is missing)."""
     present = [t for t in tables if t is not None]
     if not present:
@@ -188,8 +223,11 @@ def comparison_markdown(tables: Sequence[PushTable | None], labels: Sequence[str
     ref = present[0]
     head = "| push | impulse (N s) | " + " | ".join(labels) + " |\n|---|---|" + "---|" * len(labels) + "\n"
     lines = []
-    for kind, title in (("control", "no push (control: the same episodes unpushed)"), ("impulse", "impulse sweep"),
-                        ("sustained", "sustained (Table 1)")):
+    for kind, title in (
+        ("control", "no push (control: the same episodes unpushed)"),
+        ("impulse", "impulse sweep"),
+        ("sustained", "sustained (Table 1)"),
+    ):
         rows = [r for r in ref.cells() if r["kind"] == kind]
         if not rows:
             continue
@@ -204,8 +242,10 @@ def comparison_markdown(tables: Sequence[PushTable | None], labels: Sequence[str
             summary.append(f"- {name}: missing{(' (' + missing_note + ')') if missing_note else ''}\n")
             continue
         ls = t.largest_survived(rate)
-        summary.append(f"- {name}: survival >= {rate:g} up to {_fmt_force(ls['largest_force_rate'])}; all trials survived up to "
-                       f"{_fmt_force(ls['largest_force_all_survived'])}; first fall at {_fmt_force(ls['first_force_with_fall'])}\n")
+        summary.append(
+            f"- {name}: survival >= {rate:g} up to {_fmt_force(ls['largest_force_rate'])}; all trials survived up to "
+            f"{_fmt_force(ls['largest_force_all_survived'])}; first fall at {_fmt_force(ls['first_force_with_fall'])}\n"
+        )
     return "".join(lines) + "".join(summary)
 
 
@@ -247,7 +287,9 @@ def save_tables(tables: dict[str, PushTable | None], path: str | Path) -> Path:
     from charctl.runs import atomic_write_text
 
     path = Path(path)
-    atomic_write_text(path, json.dumps({k: (v.to_dict() if v is not None else None) for k, v in tables.items()}, indent=1))
+    atomic_write_text(
+        path, json.dumps({k: (v.to_dict() if v is not None else None) for k, v in tables.items()}, indent=1)
+    )
     return path
 
 
@@ -259,4 +301,4 @@ def window_fraction(t0: np.ndarray, dt: float, start: np.ndarray, duration: np.n
 
 def iter_chunks(items: list, size: int) -> Iterable[list]:
     for i in range(0, len(items), size):
-        yield items[i:i + size]
+        yield items[i : i + size]

@@ -81,7 +81,7 @@ def contact_map(batch: QPBatch, params: QPParams) -> tuple[np.ndarray, np.ndarra
     basis = friction_basis(params.mu)  # (3, 4)
     big_b = np.zeros((3, N_LAMBDA))
     for c in range(N_POINTS):  # 4 fixed blocks, built once per call (not per env)
-        big_b[:, c * N_EDGES:(c + 1) * N_EDGES] = basis
+        big_b[:, c * N_EDGES : (c + 1) * N_EDGES] = basis
     r = batch.points - batch.com[:, None, :]  # (N, 4, 3)
     moment = np.einsum("ncij,jk->ncik", skew(r), basis)  # (N, 4, 3, 4)
     moment = moment.transpose(0, 2, 1, 3).reshape(n, 3, N_LAMBDA)
@@ -183,22 +183,22 @@ def full_problem(batch: QPBatch, params: QPParams, i: int) -> dict[str, np.ndarr
         cols = slice(6 + c * N_EDGES, 6 + (c + 1) * N_EDGES)
         a[:3, cols] = -basis
         a[3:, cols] = -skew(r[c]) @ basis
-    a[3:, 6 + N_LAMBDA:] = -np.eye(3)
+    a[3:, 6 + N_LAMBDA :] = -np.eye(3)
     w = batch.ang_vel[i]
     b = np.concatenate([mass * GRAVITY, -np.cross(w, inertia @ w)])
     p = np.zeros((nz, nz))
     p[:6, :6] = np.diag(weights(params))
-    p[6:6 + N_LAMBDA, 6:6 + N_LAMBDA] = params.force_reg / mass**2 * np.eye(N_LAMBDA)
+    p[6 : 6 + N_LAMBDA, 6 : 6 + N_LAMBDA] = params.force_reg / mass**2 * np.eye(N_LAMBDA)
     inv_i = np.linalg.inv(inertia)
-    p[6 + N_LAMBDA:, 6 + N_LAMBDA:] = params.torque_reg * inv_i.T @ inv_i
+    p[6 + N_LAMBDA :, 6 + N_LAMBDA :] = params.torque_reg * inv_i.T @ inv_i
     q = np.zeros(nz)
     q[:6] = -weights(params) * batch.acc_des[i]
     lb = np.full(nz, -np.inf)
     ub = np.full(nz, np.inf)
-    lb[6:6 + N_LAMBDA] = 0.0
-    ub[6:6 + N_LAMBDA] = np.where(np.repeat(batch.active[i], N_EDGES), np.inf, 0.0)
+    lb[6 : 6 + N_LAMBDA] = 0.0
+    ub[6 : 6 + N_LAMBDA] = np.where(np.repeat(batch.active[i], N_EDGES), np.inf, 0.0)
     limit = params.torque_limit if batch.active[i].any() else 0.0
-    lb[6 + N_LAMBDA:], ub[6 + N_LAMBDA:] = -limit, limit
+    lb[6 + N_LAMBDA :], ub[6 + N_LAMBDA :] = -limit, limit
     fixed = np.flatnonzero(lb == ub)  # swing points / disabled torque: equality rows, not twin bounds
     a = np.vstack([a, np.eye(nz)[fixed]])
     b = np.concatenate([b, lb[fixed]])

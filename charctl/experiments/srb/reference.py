@@ -125,7 +125,9 @@ def composite_inertia(clip, frame: int = 0) -> tuple[np.ndarray, float, np.ndarr
     rot = data.ximat[ids].reshape(-1, 3, 3)
     own = np.einsum("bij,bj,bkj->bik", rot, model.body_inertia[ids], rot)
     r = data.xipos[ids] - com
-    parallel = m[:, None, None] * (np.einsum("bi,bi->b", r, r)[:, None, None] * np.eye(3) - np.einsum("bi,bj->bij", r, r))
+    parallel = m[:, None, None] * (
+        np.einsum("bi,bi->b", r, r)[:, None, None] * np.eye(3) - np.einsum("bi,bj->bij", r, r)
+    )
     inertia_world = (own + parallel).sum(0)
     pelvis = data.xmat[1].reshape(3, 3)
     inertia = pelvis.T @ inertia_world @ pelvis
@@ -281,7 +283,10 @@ def build_reference(clip, contact_height: float = 0.03, contact_speed: float = 1
     c = stance.shape[0]
     for j, foot in enumerate(("right", "left")):
         if stance[:, j].all() or not stance[:, j].any():
-            raise CharctlError(f"clip {clip.name!r}: the {foot} foot never " f"{'lifts off' if stance[:, j].all() else 'touches down'}; srb needs a walking clip")
+            raise CharctlError(
+                f"clip {clip.name!r}: the {foot} foot never "
+                f"{'lifts off' if stance[:, j].all() else 'touches down'}; srb needs a walking clip"
+            )
     sole = sole_points_world(clip)
     if clip.loop:
         yaw0, yaw1 = R.yaw_about_y(clip.local_rot[[0, c], 0])
@@ -308,6 +313,15 @@ def build_reference(clip, contact_height: float = 0.03, contact_speed: float = 1
     downs = [f for j in range(2) for f in transitions(stance[:, j])[0]]
     td_height = float(clip.root_pos[downs, 1].min())
     return Reference(
-        name=clip.name, fps=float(clip.fps), root_pos=pos.copy(), root_rot=rot, lin_vel=lin_vel, ang_vel=ang_vel,
-        sole=sole[:c].copy(), stance=stance, cycle_yaws=yaws, cycle_shifts=shifts, touchdown_height=td_height,
+        name=clip.name,
+        fps=float(clip.fps),
+        root_pos=pos.copy(),
+        root_rot=rot,
+        lin_vel=lin_vel,
+        ang_vel=ang_vel,
+        sole=sole[:c].copy(),
+        stance=stance,
+        cycle_yaws=yaws,
+        cycle_shifts=shifts,
+        touchdown_height=td_height,
     )

@@ -37,14 +37,32 @@ class Agent:
     iteration: int = 0
     samples: int = 0
     wall_time: float = 0.0
-    history: dict = field(default_factory=lambda: {"iteration": [], "samples": [], "episode_length": [], "episode_return": [], "reward": []})
+    history: dict = field(
+        default_factory=lambda: {
+            "iteration": [],
+            "samples": [],
+            "episode_length": [],
+            "episode_return": [],
+            "reward": [],
+        }
+    )
 
     def signature(self, cfg) -> dict:
-        return {"obs_dim": OBS_DIM, "act_dim": ACT_DIM, "hidden": list(cfg.ppo.hidden), "activation": str(cfg.ppo.activation)}
+        return {
+            "obs_dim": OBS_DIM,
+            "act_dim": ACT_DIM,
+            "hidden": list(cfg.ppo.hidden),
+            "activation": str(cfg.ppo.activation),
+        }
 
     def state(self) -> dict:
-        return {"ppo": self.ppo.state_dict(), "iteration": self.iteration, "samples": self.samples,
-                "wall_time": self.wall_time, "history": self.history}
+        return {
+            "ppo": self.ppo.state_dict(),
+            "iteration": self.iteration,
+            "samples": self.samples,
+            "wall_time": self.wall_time,
+            "history": self.history,
+        }
 
     def load(self, state: dict) -> None:
         self.ppo.load_state_dict(state["ppo"])
@@ -85,7 +103,9 @@ class RolloutStats:
     truncated: int = 0
 
 
-def collect_rollout(agent: Agent, env: SRBEnv, storage: RolloutStorage, obs: np.ndarray, gamma: float) -> tuple[np.ndarray, RolloutStats]:
+def collect_rollout(
+    agent: Agent, env: SRBEnv, storage: RolloutStorage, obs: np.ndarray, gamma: float
+) -> tuple[np.ndarray, RolloutStats]:
     """Fill `storage` with one rollout; returns the next observation and episode statistics."""
     model = agent.model
     stats = RolloutStats()
@@ -183,15 +203,23 @@ class SrbLearner:
             self.last_len, self.last_ret = float(np.mean(stats.lengths)), float(np.mean(stats.returns))
         mean_r = float(np.mean(stats.rewards))
         h = agent.history
-        for k, v in (("iteration", agent.iteration + 1), ("samples", agent.samples + self.samples_per_iteration),
-                     ("episode_length", self.last_len), ("episode_return", self.last_ret), ("reward", mean_r)):
+        for k, v in (
+            ("iteration", agent.iteration + 1),
+            ("samples", agent.samples + self.samples_per_iteration),
+            ("episode_length", self.last_len),
+            ("episode_return", self.last_ret),
+            ("reward", mean_r),
+        ):
             h[k].append(v)
         # episode statistics are NaN until the first episode ends: logged only once they exist
         episode = {"rollout/episode_length": self.last_len, "rollout/episode_return": self.last_ret}
         return {
-            "rollout/reward_per_step": mean_r, **{k: v for k, v in episode.items() if np.isfinite(v)},
-            "rollout/terminated": float(stats.terminated), "rollout/truncated": float(stats.truncated),
-            "perf/samples_per_s": self.samples_per_iteration / max(t2 - t0, 1e-9), **losses,
+            "rollout/reward_per_step": mean_r,
+            **{k: v for k, v in episode.items() if np.isfinite(v)},
+            "rollout/terminated": float(stats.terminated),
+            "rollout/truncated": float(stats.truncated),
+            "perf/samples_per_s": self.samples_per_iteration / max(t2 - t0, 1e-9),
+            **losses,
         }
 
     def progress_fields(self, stats: dict[str, float]) -> dict[str, float]:
@@ -201,14 +229,19 @@ class SrbLearner:
         h, env = self.agent.history, self.env
         write_curve(self.run, h)
         return {
-            "episode_length": self.last_len, "episode_return": self.last_ret,
+            "episode_length": self.last_len,
+            "episode_return": self.last_ret,
             "reward_per_step": h["reward"][-1] if h["reward"] else float("nan"),
             "reward_per_step_last25": float(np.nanmean(h["reward"][-25:])) if h["reward"] else float("nan"),
             "train_wall_s": self.agent.wall_time,
-            "rollout_samples_per_s": self.iterations_this_session * self.samples_per_iteration / max(self.t_rollout, 1e-9),
+            "rollout_samples_per_s": self.iterations_this_session
+            * self.samples_per_iteration
+            / max(self.t_rollout, 1e-9),
             "update_s_per_iteration": self.t_update / max(self.iterations_this_session, 1),
-            "qp_solves": env.stats["qp_solves"], "qp_failures": env.stats["qp_failures"],
-            "late_touchdowns": env.stats["late_touchdowns"], "early_touchdowns": env.stats["early_touchdowns"],
+            "qp_solves": env.stats["qp_solves"],
+            "qp_failures": env.stats["qp_failures"],
+            "late_touchdowns": env.stats["late_touchdowns"],
+            "early_touchdowns": env.stats["early_touchdowns"],
         }
 
 
@@ -217,8 +250,11 @@ def train(cfg, run) -> dict:
     from charctl.rl.runner import RunnerSettings, run_on_policy
 
     tc = cfg.train
-    settings = RunnerSettings(total_samples=int(tc.total_samples), checkpoint_every=int(tc.checkpoint_every),
-                              description="srb (SRB + QP, PPO)")
+    settings = RunnerSettings(
+        total_samples=int(tc.total_samples),
+        checkpoint_every=int(tc.checkpoint_every),
+        description="srb (SRB + QP, PPO)",
+    )
     return run_on_policy(SrbLearner(cfg, run), run, settings)
 
 
@@ -242,8 +278,10 @@ def write_curve(run, history: dict) -> None:
 
     fig, axes = new_figure(1, 2, figsize=(10, 3.6))
     x = np.array(history["samples"], dtype=float)
-    for ax, key, label, color in ((axes[0], "episode_length", "mean episode length (steps)", "tab:blue"),
-                                  (axes[1], "reward", "reward per step", "tab:orange")):
+    for ax, key, label, color in (
+        (axes[0], "episode_length", "mean episode length (steps)", "tab:blue"),
+        (axes[1], "reward", "reward per step", "tab:orange"),
+    ):
         y = np.array(history[key], dtype=float)
         ax.plot(x, y, lw=0.6, alpha=0.35, color=color)
         ax.plot(x, moving_average(y, 25), lw=1.6, color=color)
