@@ -56,6 +56,29 @@ class Learner(Protocol):
         """Experiment-specific final metrics from the last iteration's statistics."""
 
 
+class AgentCounters:
+    """Mixin for learners whose counters live on `self.agent` (so checkpoints keep their layout):
+    `iteration` and `samples` read and write `self.agent.iteration` / `self.agent.samples`."""
+
+    agent: object
+
+    @property
+    def iteration(self) -> int:
+        return self.agent.iteration
+
+    @iteration.setter
+    def iteration(self, value: int) -> None:
+        self.agent.iteration = value
+
+    @property
+    def samples(self) -> int:
+        return self.agent.samples
+
+    @samples.setter
+    def samples(self, value: int) -> None:
+        self.agent.samples = value
+
+
 @dataclass(frozen=True)
 class RunnerSettings:
     """Loop settings (from the experiment's `train` config section)."""

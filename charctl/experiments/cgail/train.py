@@ -29,6 +29,7 @@ from charctl.experiments.cgail.discriminator import (
 from charctl.experiments.cgail.env import CgailEnv
 from charctl.experiments.cgail.skills import DemoPairs, load_skills, select_skills
 from charctl.rl.ppo import PPO, ActorCritic
+from charctl.rl.runner import AgentCounters
 from charctl.rl.storage import RolloutStorage
 
 
@@ -402,7 +403,7 @@ def _synchronize(device: str) -> None:
         torch.cuda.synchronize(device)
 
 
-class CgailLearner:
+class CgailLearner(AgentCounters):
     """One cgail iteration for the shared runner (charctl.rl.runner): rollout, rewards, PPO,
     discriminator. Counters live on the agent so checkpoints keep their layout."""
 
@@ -437,23 +438,6 @@ class CgailLearner:
         self.samples_per_iteration = cfg.train.rollout_steps * self.env.N
         self.episode_lengths: list = []
         self.rng = np.random.default_rng(cfg.seed + 7919)
-
-    # counters (the runner advances them)
-    @property
-    def iteration(self) -> int:
-        return self.agent.iteration
-
-    @iteration.setter
-    def iteration(self, value: int) -> None:
-        self.agent.iteration = value
-
-    @property
-    def samples(self) -> int:
-        return self.agent.samples
-
-    @samples.setter
-    def samples(self, value: int) -> None:
-        self.agent.samples = value
 
     def state_dict(self) -> dict:
         return agent_state(self.agent, self.env)

@@ -18,6 +18,7 @@ import torch
 
 from charctl.experiments.srb.env import ACT_DIM, OBS_DIM, SRBEnv
 from charctl.rl.ppo import PPO, ActorCritic, PPOConfig
+from charctl.rl.runner import AgentCounters
 from charctl.rl.storage import RolloutStorage
 
 
@@ -135,7 +136,7 @@ def collect_rollout(
     return obs, stats
 
 
-class SrbLearner:
+class SrbLearner(AgentCounters):
     """One srb iteration for the shared runner (charctl.rl.runner): SRB + QP rollout, then PPO."""
 
     def __init__(self, cfg, run):
@@ -157,22 +158,6 @@ class SrbLearner:
             tc = self.cfg.train
             self.env = SRBEnv(self.cfg, int(tc.num_envs), seed=int(self.cfg.seed) + 1000 * self.agent.iteration)
             self.obs = self.env.observe()
-
-    @property
-    def iteration(self) -> int:
-        return self.agent.iteration
-
-    @iteration.setter
-    def iteration(self, value: int) -> None:
-        self.agent.iteration = value
-
-    @property
-    def samples(self) -> int:
-        return self.agent.samples
-
-    @samples.setter
-    def samples(self, value: int) -> None:
-        self.agent.samples = value
 
     def state_dict(self) -> dict:
         return self.agent.state()
