@@ -112,26 +112,27 @@ def collect_rollout(
     stats = RolloutStats()
     storage.clear()
     for _ in range(storage.steps):
-        obs_t = torch.as_tensor(obs, dtype=torch.float32)
+        obs_t = torch.as_tensor(obs, dtype=torch.float32, device=storage.obs.device)
         action, logp, value = model.act(obs_t)
-        obs, reward, terminal, truncated, info = env.step(action.numpy().astype(float))
-        reward_t = torch.as_tensor(reward, dtype=torch.float32)
+        obs, reward, terminal, truncated, info = env.step(action.cpu().numpy().astype(float))
+        reward_t = torch.as_tensor(reward, dtype=torch.float32, device=obs_t.device)
         idx = info["done_idx"]
         if idx.size:
             trunc = truncated[idx]
             if trunc.any():  # bootstrap time-limit truncations: r += gamma V(s_final)
                 with torch.no_grad():
-                    v_final = model.value(torch.as_tensor(info["final_obs"][trunc], dtype=torch.float32))
-                reward_t[torch.as_tensor(idx[trunc])] += gamma * v_final
+                    final = torch.as_tensor(info["final_obs"][trunc], dtype=torch.float32, device=obs_t.device)
+                    v_final = model.value(final)
+                reward_t[torch.as_tensor(idx[trunc], device=obs_t.device)] += gamma * v_final
             stats.lengths.extend(info["episode_length"].tolist())
             stats.returns.extend(info["episode_return"].tolist())
             stats.terminated += int(terminal[idx].sum())
             stats.truncated += int(trunc.sum())
-        done = torch.as_tensor(terminal | truncated, dtype=torch.float32)
+        done = torch.as_tensor(terminal | truncated, dtype=torch.float32, device=obs_t.device)
         storage.add(obs_t, None, action, logp, value, reward_t, done)
         stats.rewards.append(float(reward.mean()))
     with torch.no_grad():
-        last_v = model.value(torch.as_tensor(obs, dtype=torch.float32))
+        last_v = model.value(torch.as_tensor(obs, dtype=torch.float32, device=storage.obs.device))
     storage.finish(last_v, gamma, agent.ppo.cfg.lam)
     return obs, stats
 
@@ -144,7 +145,11 @@ class SrbLearner(AgentCounters):
         self.cfg, self.run = cfg, run
         self.agent = build_agent(cfg)
         tc = cfg.train
-        self.storage = RolloutStorage(int(tc.rollout_steps), int(tc.num_envs), OBS_DIM, ACT_DIM)
+        from charctl.config import resolve_device
+
+        self.device = resolve_device(str(cfg.device))  # networks and rollout storage; the SRB env stays numpy
+        self.agent.model.to(self.device)  # in place: the optimiser keeps the same parameters
+        self.storage = RolloutStorage(int(tc.rollout_steps), int(tc.num_envs), OBS_DIM, ACT_DIM, device=self.device)
         self.samples_per_iteration = int(tc.num_envs) * int(tc.rollout_steps)
         self.env: SRBEnv | None = None
         self.obs: np.ndarray | None = None
