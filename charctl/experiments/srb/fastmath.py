@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from charctl.motion.rotations import to_matrix  # noqa: F401  (re-exported: one implementation)
+
 
 def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """a x b over the last axis (..., 3)."""
@@ -95,24 +97,6 @@ def exp_map(r: np.ndarray) -> np.ndarray:
 
 def normalize(q: np.ndarray) -> np.ndarray:
     return q / np.sqrt(np.sum(q * q, axis=-1, keepdims=True))
-
-
-def to_matrix(q: np.ndarray) -> np.ndarray:
-    x, y, z, w = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
-    return np.stack(
-        [
-            1 - 2 * (y * y + z * z),
-            2 * (x * y - z * w),
-            2 * (x * z + y * w),
-            2 * (x * y + z * w),
-            1 - 2 * (x * x + z * z),
-            2 * (y * z - x * w),
-            2 * (x * z - y * w),
-            2 * (y * z + x * w),
-            1 - 2 * (x * x + y * y),
-        ],
-        axis=-1,
-    ).reshape(q.shape[:-1] + (3, 3))
 
 
 def quat_angle(a: np.ndarray, b: np.ndarray) -> np.ndarray:
