@@ -265,6 +265,7 @@ RANGE_RULES: dict[str, dict] = {
             "seconds",
             "mass",
             "friction",
+            "armature",
             "max_grad_norm",
             "action_std",
             "action_scale",

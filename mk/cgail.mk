@@ -1,13 +1,16 @@
 # cgail reproduction targets (included by the Makefile).
 CGAIL_SMALL := outputs/repro/cgail-small
 CGAIL_PAPER := outputs/repro/cgail-paper
+# The shipped amp-walk, tracking-walk and cgail-3skill were trained before the small preset moved to
+# 150 Hz physics with 0.05 joint armature (docs/cgail.md, "Throughput"): reproduce them at their rate.
+CGAIL_300HZ := env.physics_hz=300 env.armature=0.01
 
 .PHONY: repro-cgail-small repro-cgail-paper demo-cgail
 
 repro-cgail-small: install ## cgail: the shipped policies' runs (pretrained/README.md: cGAIL 3 skills, AMP and tracking walk; ~3 h on 2 cores), evaluated
-	$(CHARCTL) train cgail scale=small train.total_samples=8000000 seed=1 output_root=$(CGAIL_SMALL)/cgail
-	$(CHARCTL) train cgail scale=small use_skills=[walk] cgail.conditional=false train.total_samples=2000000 seed=1 output_root=$(CGAIL_SMALL)/amp
-	$(CHARCTL) train cgail scale=small use_skills=[walk] cgail.conditional=false reward.kind=tracking train.total_samples=1500000 seed=1 output_root=$(CGAIL_SMALL)/tracking
+	$(CHARCTL) train cgail scale=small train.total_samples=8000000 $(CGAIL_300HZ) seed=1 output_root=$(CGAIL_SMALL)/cgail
+	$(CHARCTL) train cgail scale=small use_skills=[walk] cgail.conditional=false train.total_samples=2000000 $(CGAIL_300HZ) seed=1 output_root=$(CGAIL_SMALL)/amp
+	$(CHARCTL) train cgail scale=small use_skills=[walk] cgail.conditional=false reward.kind=tracking train.total_samples=1500000 $(CGAIL_300HZ) seed=1 output_root=$(CGAIL_SMALL)/tracking
 	C=$$(ls -d $(CGAIL_SMALL)/cgail/cgail/*/ | tail -1); A=$$(ls -d $(CGAIL_SMALL)/amp/cgail/*/ | tail -1); \
 	T=$$(ls -d $(CGAIL_SMALL)/tracking/cgail/*/ | tail -1); \
 	rm -f $(CGAIL_SMALL)/report.md; \

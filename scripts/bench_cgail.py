@@ -1,17 +1,31 @@
 """cgail throughput, measured in one run on the same batch:
 
     .venv/bin/python scripts/bench_cgail.py [--envs 64] [--iters 4] [overrides...]
+    .venv/bin/python scripts/bench_cgail.py --envs 256 --against REV   # this tree vs commit REV
+
 
 1. raw batched physics: BatchedHumanoid.step with fixed PD targets (control steps/s = samples/s)
 2. rollout: sim + observations + policy forward + discriminator reward (samples/s)
 3. the whole training loop (rollout + reward + PPO + discriminator update), with time fractions.
 Prints rollout/raw (target >= 70 %) and what limits it.
+
+`--against REV` exports commit REV's tree (git archive) to a temporary folder and runs its own
+bench_cgail.py and this tree's, each with its own `scale=small` preset, alternately A B A B in
+subprocesses, then prints the whole-loop samples/s of both and their ratio (means over the rounds,
+so background load that drifts during the run hits both sides alike).
 """
 
 from __future__ import annotations
 
 import argparse
+import os
+import re
+import subprocess
+import sys
+import tarfile
+import tempfile
 import time
+from pathlib import Path
 
 import numpy as np
 import torch
@@ -21,8 +35,13 @@ def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--envs", type=int, default=64)
     ap.add_argument("--iters", type=int, default=4)
+    ap.add_argument("--against", metavar="REV", help="also bench commit REV's tree and print the ratio")
+    ap.add_argument("--rounds", type=int, default=2, help="A/B rounds with --against")
     ap.add_argument("overrides", nargs="*", default=["scale=small"])
     a = ap.parse_args()
+    if a.against:
+        compare_with_revision(a.against, a.envs, a.iters, a.rounds, a.overrides)
+        return
     from charctl.config import compose_config
     from charctl.experiments.cgail.config import Config
     from charctl.experiments.cgail.env import CgailEnv
@@ -91,6 +110,42 @@ def main() -> None:
     )
     print(f"  whole training loop     {full:10,.0f} samples/s")
     print("  time per phase: " + ", ".join(f"{k} {100 * v / total:.0f} %" for k, v in phases.items()))
+
+
+LOOP_LINE = re.compile(r"whole training loop\s+([\d,]+) samples/s")
+
+
+def bench_tree(root: Path, envs: int, iters: int, overrides: list[str]) -> float:
+    """Run `root`'s own bench_cgail.py in a subprocess (imports from `root`); whole-loop samples/s."""
+    cmd = [sys.executable, str(root / "scripts" / "bench_cgail.py"), "--envs", str(envs), "--iters", str(iters)]
+    env = {**os.environ, "PYTHONPATH": str(root)}
+    out = subprocess.run([*cmd, *overrides], cwd=root, env=env, capture_output=True, text=True, check=True).stdout
+    print("\n".join("    " + line for line in out.strip().splitlines()))
+    match = LOOP_LINE.search(out)
+    if match is None:
+        raise SystemExit(f"no 'whole training loop' line in the output of {root}")
+    return float(match.group(1).replace(",", ""))
+
+
+def compare_with_revision(rev: str, envs: int, iters: int, rounds: int, overrides: list[str]) -> None:
+    """Whole-loop samples/s of this tree and of commit `rev`, alternated, and their ratio."""
+    here = Path(__file__).resolve().parents[1]
+    with tempfile.TemporaryDirectory() as tmp:
+        archive = Path(tmp) / "rev.tar"
+        subprocess.run(["git", "archive", "-o", str(archive), rev], cwd=here, check=True)
+        with tarfile.open(archive) as tar:
+            tar.extractall(Path(tmp) / "rev", filter="data")
+        old_root = Path(tmp) / "rev"
+        old, new = [], []
+        for r in range(rounds):
+            print(f"round {r + 1}/{rounds}: {rev}")
+            old.append(bench_tree(old_root, envs, iters, overrides))
+            print(f"round {r + 1}/{rounds}: this tree")
+            new.append(bench_tree(here, envs, iters, overrides))
+    mean_old, mean_new = sum(old) / len(old), sum(new) / len(new)
+    print(f"whole training loop, {envs} envs, {' '.join(overrides)} of each tree:")
+    print(f"  {rev}: {mean_old:10,.0f} samples/s")
+    print(f"  this tree: {mean_new:10,.0f} samples/s   ratio {mean_new / mean_old:.2f}x")
 
 
 if __name__ == "__main__":

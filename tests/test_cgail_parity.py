@@ -135,6 +135,12 @@ def test_class_reward_forms_hand_values():
     a, b, w = torch.tensor([1, 0]), torch.tensor([1, 1]), torch.tensor([1.0, 0.5])
     assert blended_class_reward(probs, a, b, w, 3, "l1").tolist() == pytest.approx([0.4, 0.5 * 0.0 + 0.5 * 0.4])
     assert blended_class_reward(probs, a, b, w, 3, "prob").tolist() == pytest.approx([0.7, 0.5 * 0.2 + 0.5 * 0.7])
+    # logratio = log(3 P(c)), clipped below at -1: log 2.1 = 0.7419; log 0.6 = -0.5108; log 0.3 -> -1
+    assert blended_class_reward(probs, a, b, w, 3, "logratio").tolist() == pytest.approx(
+        [0.741937, 0.5 * -0.510826 + 0.5 * 0.741937], abs=1e-5
+    )
+    low = blended_class_reward(probs, torch.tensor([2, 2]), torch.tensor([2, 2]), w, 3, "logratio")
+    assert low.tolist() == pytest.approx([-1.0, -1.0])
     with pytest.raises(ValueError):
         blended_class_reward(probs, a, b, w, 3, "other")
 

@@ -85,11 +85,13 @@ def test_physics_rate_is_stated_once():
     import inspect
 
     from charctl.experiments.cgail.config import EnvConfig
-    from charctl.sim import CONTROL_HZ, PHYSICS_HZ
+    from charctl.sim import CONTROL_HZ, JOINT_ARMATURE, PHYSICS_HZ
     from charctl.sim.batch import SimSettings
     from charctl.sim.humanoid import build_mjcf, load_model
 
     assert SimSettings().physics_hz == EnvConfig().physics_hz == PHYSICS_HZ
     assert SimSettings().control_hz == EnvConfig().control_hz == CONTROL_HZ
+    assert SimSettings().armature == EnvConfig().armature == JOINT_ARMATURE
+    assert inspect.signature(load_model).parameters["armature"].default == JOINT_ARMATURE
     for fn in (build_mjcf, load_model):
         assert inspect.signature(fn).parameters["physics_hz"].default == PHYSICS_HZ

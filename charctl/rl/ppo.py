@@ -34,6 +34,11 @@ class ActorCritic(nn.Module):
         x = self.obs_norm(obs)
         return x if self.cond_dim == 0 or cond is None else torch.cat([x, cond], dim=-1)
 
+    def network_input(self, obs: torch.Tensor, cond: torch.Tensor | None = None) -> torch.Tensor:
+        """Normalised observation with the command appended: the input of both heads (no parameters)."""
+        with torch.no_grad():
+            return self._input(obs, cond)
+
     def mean_action(self, obs: torch.Tensor, cond: torch.Tensor | None = None) -> torch.Tensor:
         return self.actor(self._input(obs, cond))
 
@@ -83,12 +88,18 @@ def ppo_losses(
     return {"policy": policy_loss, "value": value_loss, "clip_frac": clip_frac, "approx_kl": approx_kl}
 
 
+def make_adam(params, lr: float) -> torch.optim.Adam:
+    """Adam with the fused kernel (one kernel for all parameters; several times faster than the
+    per-tensor loop for small MLPs on CPU, same update rule)."""
+    return torch.optim.Adam(params, lr=lr, fused=True)
+
+
 class PPO:
     """Owns the actor-critic and its optimiser; `update(storage)` runs the minibatch epochs."""
 
     def __init__(self, model: ActorCritic, cfg: PPOConfig, generator: torch.Generator | None = None):
         self.model, self.cfg = model, cfg
-        self.optimizer = torch.optim.Adam([p for p in model.parameters() if p.requires_grad], lr=cfg.lr)
+        self.optimizer = make_adam([p for p in model.parameters() if p.requires_grad], lr=cfg.lr)
         self.generator = generator
 
     def update(self, storage: RolloutStorage) -> dict[str, float]:
@@ -98,17 +109,20 @@ class PPO:
         mb = min(cfg.minibatch_size, n)
         sums: dict[str, torch.Tensor] = {}  # float64 on the data's device: no host read per minibatch
         steps = 0
+        # The observation normaliser is frozen during the update: normalise the whole batch once.
+        inputs = self.model.network_input(data["obs"], data["cond"] if self.model.cond_dim else None)
         for _ in range(cfg.epochs):
             perm = torch.randperm(n, generator=self.generator).to(data["obs"].device)
             for start in range(0, n - mb + 1, mb):
                 idx = perm[start : start + mb]
-                obs, cond = data["obs"][idx], data["cond"][idx] if self.model.cond_dim else None
+                x = inputs[idx]
                 adv = data["advantages"][idx]
                 if cfg.normalize_advantages and adv.numel() > 1:
                     adv = (adv - adv.mean()) / (adv.std() + 1e-8)
-                dist = self.model.distribution(obs, cond)
+                std = self.model.log_std.exp()
+                dist = torch.distributions.Normal(self.model.actor(x), std.expand(self.model.act_dim))
                 new_logp = dist.log_prob(data["actions"][idx]).sum(-1)
-                values = self.model.value(obs, cond)
+                values = self.model.critic(x).squeeze(-1)
                 losses = ppo_losses(
                     new_logp,
                     data["log_probs"][idx],

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from charctl.motion.skeleton import FEET, load_skeleton
-from charctl.sim import CONTROL_HZ, PHYSICS_HZ
+from charctl.sim import CONTROL_HZ, JOINT_ARMATURE, PHYSICS_HZ
 from charctl.sim.humanoid import layout, load_model
 
 
@@ -31,6 +31,7 @@ class SimSettings:
     nthread: int = 0  # worker threads (0 = all CPUs)
     max_speed: float = 200.0  # |qvel| above this (m/s, rad/s) counts as a blow-up
     friction: float = 1.0
+    armature: float = JOINT_ARMATURE  # kg m^2 per hinge (charctl.sim.JOINT_ARMATURE)
 
 
 class BatchedHumanoid:
@@ -47,7 +48,7 @@ class BatchedHumanoid:
         if abs(ratio - round(ratio)) > 1e-6 or ratio < 1:
             raise ValueError(f"physics_hz ({s.physics_hz}) must be a whole multiple of control_hz ({s.control_hz})")
         self.substeps = int(round(ratio))
-        self.model = load_model(s.physics_hz, s.friction)
+        self.model = load_model(s.physics_hz, s.friction, s.armature)
         self.num_envs = num_envs
         self.batch = mujoco.batch.Batch(self.model, nsim=num_envs, nthread=s.nthread)
         self._stage_vel = int(mujoco.mjtStage.mjSTAGE_VEL)

@@ -23,7 +23,7 @@ from scipy.spatial.transform import Rotation
 
 from charctl.motion import rotations as R
 from charctl.motion.skeleton import HINGE_JOINTS, Skeleton, load_skeleton
-from charctl.sim import PHYSICS_HZ
+from charctl.sim import JOINT_ARMATURE, PHYSICS_HZ
 from charctl.sim.scene import scene_assets, scene_ground
 
 # Intrinsic Euler order of each ball joint's hinge chain (R = R_a1 R_a2 R_a3). Chosen by the
@@ -87,7 +87,7 @@ def layout() -> HumanoidLayout:
 def build_mjcf(
     physics_hz: float = PHYSICS_HZ,
     friction: float = 1.0,
-    armature: float = 0.01,
+    armature: float = JOINT_ARMATURE,
     skeleton: Skeleton | None = None,
     floor_size: float = 50.0,
 ) -> str:
@@ -188,7 +188,7 @@ def _color(name: str) -> str:
 
 
 @functools.lru_cache(maxsize=8)
-def load_model(physics_hz: float = PHYSICS_HZ, friction: float = 1.0, armature: float = 0.01):
+def load_model(physics_hz: float = PHYSICS_HZ, friction: float = 1.0, armature: float = JOINT_ARMATURE):
     """Compiled MjModel (cached per settings). Heavy import inside."""
     import mujoco
 

@@ -8,7 +8,7 @@ from dataclasses import dataclass, field
 
 from charctl.config import BaseConfig
 from charctl.rl.config import PPOConfig
-from charctl.sim import CONTROL_HZ, PHYSICS_HZ
+from charctl.sim import CONTROL_HZ, JOINT_ARMATURE, PHYSICS_HZ
 
 
 @dataclass
@@ -52,6 +52,7 @@ def paper_ppo() -> PPOConfig:
 class EnvConfig:
     num_envs: int = 64  # humanoids simulated together
     physics_hz: float = PHYSICS_HZ  # MuJoCo step rate, charctl.sim.PHYSICS_HZ (DeepMimic uses 1200 Hz)
+    armature: float = JOINT_ARMATURE  # kg m^2 rotor inertia per hinge; >= 0.05 keeps physics_hz 150 stable
     control_hz: float = CONTROL_HZ  # policy rate, charctl.sim.CONTROL_HZ (DeepMimic and the paper: 30 Hz)
     episode_seconds: float = 10.0  # truncation length of an episode
     ramp_frames: int = 60  # eq 4.10-4.11: linear command ramp length (control frames); 0 = switch in one frame
@@ -68,7 +69,8 @@ class RewardConfig:
     w_style: float = 0.5  # w_S, eq 4.1
     w_class: float = 0.5  # w_C, eq 4.1 (ignored when cgail.conditional=false)
     w_goal: float = 0.0  # w_G, eq 4.1 (0 at small scale; the paper adds it for locomotion tasks)
-    class_form: str = "l1"  # r_C: l1 (eq 4.8, zero until P(command) > 0.5) | prob (dense: r_C = P(command))
+    # r_C: l1 (eq 4.8, zero until P(command) > 0.5) | prob (dense: P(command)) | logratio (log(K P(command)), >= -1)
+    class_form: str = "l1"
     kind: str = "adversarial"  # adversarial (eq 4.1) | tracking (DeepMimic-style baseline: phase in the state)
 
 
@@ -129,8 +131,8 @@ class Config(BaseConfig):
             return f"skill names must be unique, got {names}"
         if cfg.reward.kind not in ("adversarial", "tracking"):
             return f"reward.kind must be 'adversarial' or 'tracking', got {cfg.reward.kind!r}"
-        if cfg.reward.class_form not in ("l1", "prob"):
-            return f"reward.class_form must be 'l1' or 'prob', got {cfg.reward.class_form!r}"
+        if cfg.reward.class_form not in ("l1", "prob", "logratio"):
+            return f"reward.class_form must be 'l1', 'prob' or 'logratio', got {cfg.reward.class_form!r}"
         if cfg.disc.objective not in ("lsgan", "bce"):
             return f"disc.objective must be 'lsgan' or 'bce', got {cfg.disc.objective!r}"
         if cfg.cgail.class_loss not in ("ce", "ls"):

@@ -110,10 +110,17 @@ def blended_class_reward(
     form ``l1`` is eq 4.8, r_C = 1 - min(1, ||C - c||_1) = max(0, 2 P(c) - 1) for a one-hot c: zero
     until the classifier gives the command more than half the probability. ``prob`` is the dense
     variant r_C = P(c), which pays for every step towards the commanded skill (docs/cgail.md, ablation).
+    ``logratio`` is the skill-discovery reward log q(c | s, s') - log p(c) with the uniform prior
+    p(c) = 1/K (DIAYN's form): r_C = log(K P(c)), clipped below at -1. It is 0 at chance, log K when the
+    classifier is certain, and separates P(c) = 0.10 from 0.15 by 0.4 where ``prob`` gives 0.05 — the
+    contrast ten skills need while the classifier is still unsure on policy motion.
     """
-    if form == "prob":
+    if form in ("prob", "logratio"):
         p_a = probs.gather(-1, cmd_a.unsqueeze(-1)).squeeze(-1)
         p_b = probs.gather(-1, cmd_b.unsqueeze(-1)).squeeze(-1)
+        if form == "logratio":
+            p_a = torch.clamp(torch.log(num_classes * p_a.clamp_min(1e-12)), min=-1.0)
+            p_b = torch.clamp(torch.log(num_classes * p_b.clamp_min(1e-12)), min=-1.0)
         return (1.0 - w) * p_a + w * p_b
     if form != "l1":
         raise ValueError(f"unknown class reward form {form!r}")

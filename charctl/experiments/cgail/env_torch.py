@@ -88,7 +88,9 @@ class CgailDeviceEnv:
         self.device = dev = torch.device(device)
         self.generator = torch.Generator(device=dev).manual_seed(int(seed))
         self.sim = sim or WarpBatchedHumanoid(
-            self.N, SimSettings(physics_hz=env_cfg.physics_hz, control_hz=env_cfg.control_hz), device=dev
+            self.N,
+            SimSettings(physics_hz=env_cfg.physics_hz, control_hz=env_cfg.control_hz, armature=env_cfg.armature),
+            device=dev,
         )
         self.device = dev = self.sim.device
         self.max_steps = int(round(env_cfg.episode_seconds * env_cfg.control_hz))

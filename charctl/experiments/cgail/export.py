@@ -140,7 +140,9 @@ def export(target: str, options: dict, overrides: list[str]) -> None:
             from charctl.sim.humanoid import load_model
             from charctl.viz.video import render_qpos
 
-            info = render_qpos(load_model(tr.cfg.env.physics_hz), qpos, options["video"], stats["fps"])
+            info = render_qpos(
+                load_model(tr.cfg.env.physics_hz, armature=tr.cfg.env.armature), qpos, options["video"], stats["fps"]
+            )
             print(f"wrote {options['video']} ({info['frames']} frames, falls: {stats['falls']})")
         did = True
     if not did:

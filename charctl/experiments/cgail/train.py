@@ -28,7 +28,7 @@ from charctl.experiments.cgail.discriminator import (
 )
 from charctl.experiments.cgail.env import CgailEnv
 from charctl.experiments.cgail.skills import DemoPairs, load_skills, select_skills
-from charctl.rl.ppo import PPO, ActorCritic
+from charctl.rl.ppo import PPO, ActorCritic, make_adam
 from charctl.rl.runner import AgentCounters
 from charctl.rl.storage import RolloutStorage
 
@@ -93,7 +93,7 @@ def build_agent(cfg, device: str = "cpu") -> Agent:
     with torch.no_grad():
         disc.norm.update(torch.from_numpy(pairs))  # normalise with demonstration statistics (frozen)
     disc = disc.to(device)
-    disc_opt = torch.optim.Adam(discriminator_param_groups(disc, cfg.disc), lr=cfg.disc.lr)
+    disc_opt = make_adam(discriminator_param_groups(disc, cfg.disc), lr=cfg.disc.lr)
     replay = ReplayBuffer(cfg.disc.replay_size, 2 * DISC_OBS_DIM, K, device=device)
     agent = Agent(cfg, skills, model, ppo, disc, disc_opt, demos, replay, gen, device=str(device))
     if torch.device(device).type != "cpu":
