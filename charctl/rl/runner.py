@@ -12,7 +12,10 @@ way for every experiment (the rsl_rl pattern: a runner owns the loop, the algori
 - divergence: a non-finite statistic or parameter stops the run *without* overwriting the last
   (finite) checkpoint, and raises a one-line error;
 - final metrics with the same keys for every experiment (`iterations`, `samples`, `wall_s`,
-  `samples_per_s`, then the learner's own).
+  `samples_per_s`, then the learner's own);
+- torch's global random states in every checkpoint (`torch_rng`, and `cuda_rng` when CUDA is in
+  use), restored on resume; a checkpoint written on a GPU resumes on a CPU-only machine without
+  its CUDA states (a note says so).
 """
 
 from __future__ import annotations
@@ -91,6 +94,52 @@ class RunnerSettings:
     blowup_window: int = 10  # iterations the rate must stay above the threshold
 
 
+# ---------------------------------------------------------------------------- random states
+TORCH_RNG_KEY = "torch_rng"  # CPU generator state (ByteTensor); cgail's agent_state writes the same key
+CUDA_RNG_KEY = "cuda_rng"  # list of ByteTensors, one per visible CUDA device
+
+
+def cuda_rng_states() -> list[torch.Tensor] | None:
+    """Every visible CUDA device's global generator state (CPU ByteTensors), or None when CUDA is
+    absent or not initialised (nothing in this process used it, so there is nothing to keep, and
+    asking would create a CUDA context)."""
+    if not torch.cuda.is_available() or not torch.cuda.is_initialized():
+        return None
+    return [s.cpu() for s in torch.cuda.get_rng_state_all()]
+
+
+def with_rng_states(state: dict) -> dict:
+    """`state` plus torch's global random states: `torch_rng` (unless the learner stored its own) and
+    `cuda_rng` when CUDA is in use. Plain tensors and lists, so `weights_only=True` loading works."""
+    out = dict(state)
+    out.setdefault(TORCH_RNG_KEY, torch.get_rng_state())
+    cuda = cuda_rng_states()
+    if cuda is not None:
+        out[CUDA_RNG_KEY] = cuda
+    return out
+
+
+def restore_rng_states(state: dict) -> str | None:
+    """Set torch's global random states from a checkpoint's `state` (keys absent: left alone).
+    Returns a note when CUDA states were skipped (no CUDA here, or fewer devices than saved)."""
+    if TORCH_RNG_KEY in state:
+        torch.set_rng_state(state[TORCH_RNG_KEY].cpu())
+    saved = state.get(CUDA_RNG_KEY)
+    if not saved:
+        return None
+    if not torch.cuda.is_available():
+        return (
+            f"note: the checkpoint holds CUDA random states of {len(saved)} device(s) but CUDA is not "
+            "available here; they are skipped (CPU random states are restored)"
+        )
+    count = torch.cuda.device_count()
+    for index, s in enumerate(saved[:count]):
+        torch.cuda.set_rng_state(s.cpu(), index)  # lazy: applied when CUDA initialises
+    if len(saved) > count:
+        return f"note: the checkpoint holds CUDA random states of {len(saved)} devices, this machine has {count}"
+    return None
+
+
 def _stop_if_diverged(learner: Learner, run, stats: dict[str, float]) -> None:
     """Raise `Diverged` (before any checkpoint of this iteration is written) on a NaN/inf."""
     try:
@@ -110,7 +159,11 @@ def run_on_policy(learner: Learner, run, settings: RunnerSettings) -> dict:
     from charctl.runs import StopFlag
 
     if run.resumed:
-        learner.load_state_dict(run.load_checkpoint(learner.signature()))
+        state = run.load_checkpoint(learner.signature())
+        learner.load_state_dict(state)
+        note = restore_rng_states(state)
+        if note:
+            print(note, flush=True)
     total = int(settings.total_samples)
     if learner.samples >= total:
         raise CharctlError(
@@ -137,14 +190,14 @@ def run_on_policy(learner: Learner, run, settings: RunnerSettings) -> dict:
                 fields["BLOWUPS"] = f"{100 * blowups.rate:.1f}%"
             bar.update(learner.samples_per_iteration, **fields)
             if learner.iteration % settings.checkpoint_every == 0 or stop.requested:
-                run.save_checkpoint(learner.state_dict(), learner.signature())
+                run.save_checkpoint(with_rng_states(learner.state_dict()), learner.signature())
             if stop.requested:
                 break
     if stop.requested:
         run.close()
         message = f"interrupted at iteration {learner.iteration}: checkpoint written; continue with --resume {run.dir}"
         raise stop.interrupted(message)
-    run.save_checkpoint(learner.state_dict(), learner.signature())
+    run.save_checkpoint(with_rng_states(learner.state_dict()), learner.signature())
     wall = time.perf_counter() - t_start
     metrics = {
         "iterations": learner.iteration,

@@ -3,6 +3,10 @@
 Every mode writes JSON (+ CSV / PNG) into the output folder (default `<first run>/eval/`) and
 appends its table to `report.md` there, with the command that produced it and the paper's
 numbers alongside.
+
+Policy and discriminator inference runs on the torch device of `device` (each run's config, or a
+`device=cpu|cuda|auto` override on the command line); the simulator, DTW (dtw-python) and the
+tables stay on the host, and only actions, probabilities and rewards come back from the device.
 """
 
 from __future__ import annotations
@@ -23,6 +27,8 @@ from charctl.errors import CharctlError
 from charctl.eval.dtw import dtw_align
 from charctl.eval.pose import pose_error_matrix
 from charctl.experiments.cgail.policy import TrainedRun, load_trained_run, local_joint_rotations, resolve_run_dirs
+
+EVAL_OVERRIDES = ("output_root", "device")  # the only key=value overrides `charctl eval cgail` takes
 
 # Table 6.1 of the paper: per-motion mean per-frame pose error after DTW (AMP, cGAIL).
 PAPER_TABLE_6_1 = {
@@ -49,9 +55,64 @@ class SkillRollout:
     falls: int
 
 
+# ---------------------------------------------------------------------------- device
+@dataclass
+class DeviceRun(TrainedRun):
+    """A trained run whose policy and discriminator live on torch `device` (loaded on the CPU with
+    `weights_only=True`, then moved). Inputs go to the device, results come back as numpy."""
+
+    device: str = "cpu"
+
+    @torch.no_grad()
+    def mean_action(self, env) -> np.ndarray:
+        """(N, 28) mean actions (PD targets, the policy's action units) as float64 on the host."""
+        dev = self.device
+        obs = torch.as_tensor(env.state, dtype=torch.float32, device=dev)
+        cond = torch.as_tensor(env.command_blend(), dtype=torch.float32, device=dev) if self.agent.conditional else None
+        return self.agent.model.mean_action(obs, cond).cpu().numpy().astype(np.float64)
+
+    @torch.no_grad()
+    def discriminate(self, pairs: np.ndarray) -> tuple[torch.Tensor, torch.Tensor | None]:
+        """Discriminator score d (B,) and class logits (B, K) (None for AMP) of (B, 266) (o_t, o_t+1)
+        pairs, computed and left on the device."""
+        return self.agent.disc(torch.as_tensor(pairs, dtype=torch.float32, device=self.device))
+
+
+def split_eval_overrides(overrides: list[str]) -> tuple[str | None, list[str]]:
+    """(the `device=` override resolved to a torch device, or None; the other overrides). Anything
+    but output_root= / device=, a bad device name or an absent CUDA device is a one-line error, raised
+    before any run is loaded."""
+    other = [o for o in overrides if o.split("=", 1)[0] not in EVAL_OVERRIDES]
+    if other:
+        raise CharctlError(f"cgail eval takes only output_root=... and device=... overrides (got {' '.join(other)})")
+    devices = [o.split("=", 1)[1] for o in overrides if o.split("=", 1)[0] == "device"]
+    rest = [o for o in overrides if o.split("=", 1)[0] != "device"]
+    return (eval_device(devices[-1]) if devices else None), rest
+
+
+def eval_device(name: str) -> str:
+    """The torch device `name` (auto | cpu | cuda | cuda:N) stands for: auto -> cuda when available,
+    else cpu; a bad name or a missing CUDA device is a one-line CharctlError."""
+    from charctl.config import resolve_device
+
+    return resolve_device(str(name))
+
+
+def load_eval_run(run_dir: str | Path, device: str | None = None) -> DeviceRun:
+    """The run's agent with its policy and discriminator on torch `device` (None: the run's configured
+    `device`, resolved). The checkpoint is read with `torch.load(weights_only=True,
+    map_location="cpu")`: its random-number states must stay CPU ByteTensors for
+    `torch.set_rng_state`; only the two inference networks move to the device."""
+    tr = load_trained_run(run_dir)
+    dev = device if device is not None else eval_device(str(tr.cfg.get("device", "auto")))
+    tr.agent.model.to(dev)
+    tr.agent.disc.to(dev)
+    return DeviceRun(tr.run_dir, tr.cfg, tr.agent, device=dev)
+
+
 # ---------------------------------------------------------------------------- rollouts
 @torch.no_grad()
-def rollout_skill(tr: TrainedRun, skill: int, episodes: int, seconds: float, seed: int = 0) -> SkillRollout:
+def rollout_skill(tr: DeviceRun, skill: int, episodes: int, seconds: float, seed: int = 0) -> SkillRollout:
     """`episodes` envs commanded with `skill` (mean actions, RSI at frame 0, no switching)."""
     env = tr.make_env(episodes, seed=seed, switch_prob=0.0, episode_seconds=seconds + 1.0)
     env.forced_command = np.full(episodes, skill)
@@ -75,12 +136,12 @@ def rollout_skill(tr: TrainedRun, skill: int, episodes: int, seconds: float, see
             rots[i].append(cur[i])
         if not alive.any():
             break
-    allp = torch.as_tensor(np.concatenate(pairs), dtype=torch.float32)
-    d, logits = tr.agent.disc(allp)
+    d, logits = tr.discriminate(np.concatenate(pairs))
     from charctl.experiments.cgail.discriminator import style_reward
 
-    probs = F.softmax(logits, -1).numpy() if logits is not None else None
-    return SkillRollout([np.array(r) for r in rots], probs, style_reward(d, tr.agent.cfg.disc.objective).numpy(), falls)
+    probs = F.softmax(logits, -1).cpu().numpy() if logits is not None else None
+    r_style = style_reward(d, tr.agent.cfg.disc.objective).cpu().numpy()
+    return SkillRollout([np.array(r) for r in rots], probs, r_style, falls)
 
 
 def skill_reference(tr: TrainedRun, skill: int, frames: int) -> np.ndarray:
@@ -104,7 +165,7 @@ def dtw_pose_error(rollout_rot: np.ndarray, reference_rot: np.ndarray) -> float:
 
 
 # ---------------------------------------------------------------------------- modes
-def eval_dtw(runs: list[TrainedRun], episodes: int, out: Path) -> dict:
+def eval_dtw(runs: list[DeviceRun], episodes: int, out: Path) -> dict:
     skills = runs[0].skill_names
     table: dict[str, dict[str, float]] = {}
     for s in skills:
@@ -139,7 +200,7 @@ def eval_dtw(runs: list[TrainedRun], episodes: int, out: Path) -> dict:
 
 
 @torch.no_grad()
-def survival_rollout(tr: TrainedRun, skill: int, episodes: int, seconds: float, seed: int = 0) -> dict:
+def survival_rollout(tr: DeviceRun, skill: int, episodes: int, seconds: float, seed: int = 0) -> dict:
     """`episodes` envs held on `skill` for `seconds` (mean actions, RSI at random clip frames and
     random headings, no command switches). Returns the fraction that never fell and, for cGAIL,
     the classifier's accuracy on the policy's pairs up to each env's first fall."""
@@ -147,23 +208,22 @@ def survival_rollout(tr: TrainedRun, skill: int, episodes: int, seconds: float, 
     env.forced_command = np.full(episodes, skill)
     env.reset(np.arange(episodes))
     alive = np.ones(episodes, dtype=bool)
-    hits = total = 0
+    hits, total = torch.zeros((), dtype=torch.long, device=tr.device), 0  # hits stay on the device until the end
     for _ in range(int(round(seconds * env.cfg.control_hz))):
         o_t = env.obs.copy()
         res = env.step(tr.mean_action(env))
         if tr.agent.conditional:
-            pair = torch.as_tensor(np.concatenate([o_t, res.pair_next], axis=1)[alive], dtype=torch.float32)
-            _, logits = tr.agent.disc(pair)
-            hits += int((logits.argmax(-1) == skill).sum())
+            _, logits = tr.discriminate(np.concatenate([o_t, res.pair_next], axis=1)[alive])
+            hits += (logits.argmax(-1) == skill).sum()
             total += int(alive.sum())
         alive &= ~res.terminated
     out = {"episodes": episodes, "seconds": seconds, "no_fall": float(alive.mean())}
     if tr.agent.conditional:
-        out["class_acc_policy"] = hits / max(total, 1)
+        out["class_acc_policy"] = int(hits) / max(total, 1)
     return out
 
 
-def eval_survival(runs: list[TrainedRun], episodes: int, seconds: float, out: Path) -> dict:
+def eval_survival(runs: list[DeviceRun], episodes: int, seconds: float, out: Path) -> dict:
     """Share of episodes without a fall (and classifier accuracy on policy motion) per skill and run."""
     table: dict[str, dict[str, float]] = {}
     for tr in runs:
@@ -190,7 +250,7 @@ def eval_survival(runs: list[TrainedRun], episodes: int, seconds: float, out: Pa
     return result
 
 
-def eval_confusion(tr: TrainedRun, episodes: int, out: Path) -> dict:
+def eval_confusion(tr: DeviceRun, episodes: int, out: Path) -> dict:
     """Fig 6.8: mean classifier probabilities per commanded skill (policy) and per clip (data)."""
     if not tr.agent.conditional:
         raise CharctlError(f"{tr.run_dir} is an AMP (unconditional) run: it has no classifier for --confusion")
@@ -202,8 +262,8 @@ def eval_confusion(tr: TrainedRun, episodes: int, out: Path) -> dict:
     data = np.zeros((K, K))
     with torch.no_grad():
         for k, p in enumerate(tr.agent.demos.pairs):
-            _, logits = tr.agent.disc(torch.from_numpy(p))
-            data[k] = F.softmax(logits, -1).mean(0).numpy()
+            _, logits = tr.discriminate(p)
+            data[k] = F.softmax(logits, -1).mean(0).cpu().numpy()
     result = {
         "skills": tr.skill_names,
         "policy": policy.tolist(),
@@ -248,7 +308,7 @@ def eval_confusion(tr: TrainedRun, episodes: int, out: Path) -> dict:
 
 @torch.no_grad()
 def eval_switch(
-    tr: TrainedRun, a: str, b: str, trials: int, out: Path, before_s: float = 1.0, after_s: float = 2.0
+    tr: DeviceRun, a: str, b: str, trials: int, out: Path, before_s: float = 1.0, after_s: float = 2.0
 ) -> dict:
     """Fig 6.10/6.11: command A -> B mid-episode with and without the ramp; latency and falls."""
     if not tr.agent.conditional:
@@ -274,25 +334,25 @@ def eval_switch(
             o_t = env.obs.copy()
             cmd_a, cmd_b, w = env.prev_cmd.copy(), env.cmd.copy(), env.w.copy()
             res = env.step(tr.mean_action(env))
-            pair = torch.as_tensor(np.concatenate([o_t, res.pair_next], axis=1), dtype=torch.float32)
-            d, logits = tr.agent.disc(pair)
+            d, logits = tr.discriminate(np.concatenate([o_t, res.pair_next], axis=1))
             p = F.softmax(logits, -1)
             from charctl.experiments.cgail.discriminator import blended_class_reward, style_reward
 
             r_c = blended_class_reward(
                 p,
-                torch.from_numpy(cmd_a),
-                torch.from_numpy(cmd_b),
-                torch.from_numpy(w).float(),
+                torch.from_numpy(cmd_a).to(tr.device),
+                torch.from_numpy(cmd_b).to(tr.device),
+                torch.from_numpy(w).float().to(tr.device),
                 len(tr.skill_names),
                 tr.cfg.reward.class_form,
             )
-            probs.append(p.numpy())
-            rs.append(style_reward(d, tr.agent.cfg.disc.objective).numpy())
-            rc.append(r_c.numpy())
+            probs.append(p)  # device tensors; to the host once, after the episode
+            rs.append(style_reward(d, tr.agent.cfg.disc.objective))
+            rc.append(r_c)
             alive_hist.append(alive.copy())
             alive &= ~res.terminated
-        probs, rs, rc, live = np.array(probs), np.array(rs), np.array(rc), np.array(alive_hist)
+        probs, rs, rc = (torch.stack(x).cpu().numpy() for x in (probs, rs, rc))
+        live = np.array(alive_hist)
         pb = probs[t_switch:, :, kb]
         up = live[t_switch:]  # alive before the step: frames after a fall (and its reset) do not count
         latency = []
@@ -427,6 +487,7 @@ def _smooth(v: np.ndarray, k: int = 5) -> np.ndarray:
 # ---------------------------------------------------------------------------- entry point
 def evaluate(targets: list[str], options: dict, overrides: list[str]) -> None:
     """The modes given in `options` (--dtw, --confusion, --switch, --curves, --survival) over the runs."""
+    device, overrides = split_eval_overrides(overrides)
     run_dirs = resolve_run_dirs(targets, overrides, "eval")
     out = Path(options.get("out") or run_dirs[0] / "eval")
     out.mkdir(parents=True, exist_ok=True)
@@ -445,7 +506,7 @@ def evaluate(targets: list[str], options: dict, overrides: list[str]) -> None:
     needs_policy = options.get("dtw") or options.get("confusion") or options.get("switch") or options.get("survival")
     if not needs_policy:
         return
-    runs = [load_trained_run(d) for d in run_dirs]
+    runs = [load_eval_run(d, device) for d in run_dirs]
     if options.get("survival"):
         eval_survival(runs, max(episodes, 1), float(options["survival"]), out)
     if options.get("dtw"):

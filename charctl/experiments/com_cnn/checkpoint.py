@@ -36,7 +36,9 @@ class LoadedRun:
         )
 
     def predictor(self) -> CnnPredictor:
-        return CnnPredictor(self.label, self.model, int(self.cfg.data.history), str(self.cfg.data.frame))
+        """The network as an evaluation predictor; its inputs go to the device the network is on."""
+        device = str(next(self.model.parameters()).device)
+        return CnnPredictor(self.label, self.model, int(self.cfg.data.history), str(self.cfg.data.frame), device)
 
 
 def load_run(run_dir: str | Path, overrides: list[str] | None = None, device: str = "cpu") -> LoadedRun:
