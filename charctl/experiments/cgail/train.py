@@ -126,8 +126,10 @@ def agent_state(agent: Agent, env: CgailEnv | None = None) -> dict:
         "skills": [s.name for s in agent.skills],
         "clips": [s.clip_name for s in agent.skills],
     }
+    if agent.device_generator is not None:  # demonstration pairs drawn on the device
+        state["device_gen_rng"] = agent.device_generator.get_state().cpu()
     if env is not None and getattr(env, "on_device", False):
-        state["env_torch_rng"] = env.generator.get_state()  # device env (env.backend=warp): torch generator
+        state["env_torch_rng"] = env.generator.get_state().cpu()  # device env (env.backend=warp): torch generator
     elif env is not None:
         state["env_rng"] = env.rng.bit_generator.state
     return state
@@ -141,11 +143,13 @@ def load_agent_state(agent: Agent, state: dict, env: CgailEnv | None = None) -> 
         agent.replay.load_state_dict(state["replay"])
     agent.iteration, agent.samples = int(state["iteration"]), int(state["samples"])
     agent.unstable_total = int(state.get("unstable_total", 0))
-    torch.set_rng_state(state["torch_rng"])
-    agent.generator.set_state(state["gen_rng"])
+    torch.set_rng_state(state["torch_rng"].cpu())
+    agent.generator.set_state(state["gen_rng"].cpu())
+    if agent.device_generator is not None and "device_gen_rng" in state:
+        agent.device_generator.set_state(state["device_gen_rng"].cpu())
     if env is not None and getattr(env, "on_device", False):
         if "env_torch_rng" in state:
-            env.generator.set_state(state["env_torch_rng"])
+            env.generator.set_state(state["env_torch_rng"].cpu())
     elif env is not None and "env_rng" in state:
         env.rng.bit_generator.state = state["env_rng"]
 

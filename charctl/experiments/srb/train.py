@@ -63,10 +63,13 @@ class Agent:
             "samples": self.samples,
             "wall_time": self.wall_time,
             "history": self.history,
+            "ppo_gen_rng": self.ppo.generator.get_state() if self.ppo.generator is not None else None,
         }
 
     def load(self, state: dict) -> None:
         self.ppo.load_state_dict(state["ppo"])
+        if state.get("ppo_gen_rng") is not None and self.ppo.generator is not None:
+            self.ppo.generator.set_state(state["ppo_gen_rng"])  # minibatch permutations continue, not repeat
         self.iteration, self.samples = int(state["iteration"]), int(state["samples"])
         self.wall_time = float(state.get("wall_time", 0.0))
         self.history = state.get("history", self.history)
