@@ -243,6 +243,8 @@ def smoke_argv(cmd: DocCommand, runs, cwd: Path) -> list[str]:
             skip_next = True
         elif tok.startswith("train.total_samples="):
             out.append("train.total_samples=8192")
+        elif tok.startswith("pretrained/"):  # a shipped policy: the repository's folder (the command runs elsewhere)
+            out.append(str(REPO / tok))
         else:
             out.append(tok)
     if "my_path.csv" in text:  # the user's path file, in the format the command reads
