@@ -11,6 +11,15 @@ TORCH ?= torch==2.13.0
 STAMP := $(VENV)/.charctl-installed
 export MUJOCO_GL ?= osmesa
 export PYOPENGL_PLATFORM ?= osmesa
+# The reproduction targets' multirun (-m) lines: LAUNCHER=basic runs their jobs one after another (the
+# default), LAUNCHER=ray side by side on Ray: a local instance, or the cluster at RAY_ADDRESS (README
+# "Running on a cluster"). Used as $(LAUNCH) in mk/*.mk.
+LAUNCHER ?= basic
+RAY_ADDRESS ?=
+ifeq ($(filter $(LAUNCHER),basic ray),)
+$(error LAUNCHER must be basic or ray, not '$(LAUNCHER)')
+endif
+LAUNCH := $(if $(filter ray,$(LAUNCHER)),--launcher ray$(if $(RAY_ADDRESS), --address $(RAY_ADDRESS)))
 
 .DEFAULT_GOAL := help
 .PHONY: help install render-deps test test-fast test-slow lint demo bench clean-outputs

@@ -27,6 +27,12 @@ data_app = typer.Typer(help="Inspect the motion clips (DeepMimic clips shipped i
 app.add_typer(data_app, name="data")
 
 OverridesArg = typer.Argument(None, help="Hydra overrides, e.g. scale=smoke ppo.lr=1e-4", show_default=False)
+AddressOpt = typer.Option(
+    None,
+    "--address",
+    help="Ray cluster address (auto, HOST:PORT, ray://HOST:10001); none: a local Ray",
+    show_default=False,
+)
 
 
 # ---------------------------------------------------------------------------- data
@@ -55,11 +61,71 @@ def train(
     overrides: list[str] | None = OverridesArg,
     resume: Path | None = typer.Option(None, "--resume", help="continue this run directory from its last checkpoint"),
     multirun: bool = typer.Option(False, "-m", "--multirun", help="sweep: a=1,2 b=x,y runs every combination in turn"),
+    launcher: str = typer.Option(
+        "basic", "--launcher", help="basic: jobs one after another here | ray: side by side on Ray (README)"
+    ),
+    address: str | None = AddressOpt,
+    cpus_per_job: float = typer.Option(1.0, "--cpus-per-job", help="CPUs each job reserves on Ray"),
+    gpus_per_job: float = typer.Option(0.0, "--gpus-per-job", help="GPUs each job reserves on Ray (fractions allowed)"),
 ) -> None:
     """Train an experiment: `charctl train EXPERIMENT scale=smoke ppo.lr=1e-4`."""
     from charctl.commands.train import train_command
 
-    train_command(experiment, list(overrides or []), resume=resume, multirun=multirun)
+    train_command(
+        experiment,
+        list(overrides or []),
+        resume=resume,
+        multirun=multirun,
+        launcher=launcher,
+        address=address,
+        cpus_per_job=cpus_per_job,
+        gpus_per_job=gpus_per_job,
+    )
+
+
+# ---------------------------------------------------------------------------- tune
+@app.command()
+def tune(
+    experiment: str = typer.Argument(..., help=" | ".join(EXPERIMENTS)),
+    overrides: list[str] | None = typer.Argument(
+        None,
+        help="key=choice(a,b) | key=range(lo,hi) | key=loguniform(lo,hi) are searched, other key=value are fixed",
+        show_default=False,
+    ),
+    metric: str | None = typer.Option(
+        None, "--metric", help="scalar to optimise (default: the experiment's first declared one)", show_default=False
+    ),
+    mode: str | None = typer.Option(
+        None, "--mode", help="max | min (default: the declared direction of the metric)", show_default=False
+    ),
+    trials: int = typer.Option(8, "--trials", help="number of sampled configurations"),
+    address: str | None = AddressOpt,
+    cpus_per_trial: float = typer.Option(1.0, "--cpus-per-trial", help="CPUs each trial reserves"),
+    gpus_per_trial: float = typer.Option(0.0, "--gpus-per-trial", help="GPUs each trial reserves"),
+    grace_period: int = typer.Option(1, "--grace-period", help="ASHA: reports a trial makes before it can be stopped"),
+    max_reports: int | None = typer.Option(
+        None, "--max-reports", help="ASHA max_t: stop every trial after this many reports", show_default=False
+    ),
+    seed: int = typer.Option(0, "--search-seed", help="seed of the random search"),
+) -> None:
+    """Hyper-parameter search on Ray Tune with ASHA early stopping: `charctl tune EXP key=loguniform(1e-5,1e-3)`."""
+    from charctl.commands.tune import TuneOptions, tune_command
+
+    tune_command(
+        experiment,
+        list(overrides or []),
+        TuneOptions(
+            metric=metric,
+            mode=mode,
+            trials=trials,
+            address=address,
+            cpus=cpus_per_trial,
+            gpus=gpus_per_trial,
+            grace_period=grace_period,
+            max_reports=max_reports,
+            seed=seed,
+        ),
+    )
 
 
 # ---------------------------------------------------------------------------- eval / export

@@ -41,6 +41,9 @@ CHECKPOINT_FORMAT = 1
 FAULT_DELAY_ENV = "CHARCTL_FAULT_CHECKPOINT_DELAY"
 FAULT_ENOSPC_ENV = "CHARCTL_FAULT_CHECKPOINT_ENOSPC"
 _checkpoints_written = 0
+# `charctl tune` (charctl.launch.tune) sets this to a file: every scalar set a run logs, and its final
+# metrics.json numbers, are appended there as one JSON line each, which the tuner reads as the run goes.
+METRICS_STREAM_ENV = "CHARCTL_METRICS_STREAM"
 _TEMP_RE = re.compile(r"\.tmp(\d+)$")
 
 
@@ -80,11 +83,14 @@ class Run:
 
     def log_scalars(self, scalars: dict[str, float], step: int) -> None:
         """Scalars at `step`; non-finite values are skipped (TensorBoard and strict JSON cannot hold them)."""
+        finite = {}
         for k, v in scalars.items():
             v = float(v)
             if math.isfinite(v):
                 self.writer.add_scalar(k, v, step)
+                finite[k] = v
         self._max_step = int(step) if self._max_step is None else max(self._max_step, int(step))
+        stream_scalars(self.dir, int(step), finite)
 
     def close(self) -> None:
         if self._writer is not None:
@@ -104,6 +110,9 @@ class Run:
             metrics["mujoco_warnings"] = warnings
         path = self.path(name)
         atomic_write_text(path, strict_json(metrics))
+        if name == "metrics.json":
+            numbers = {k: float(v) for k, v in metrics.items() if _is_number(v) and math.isfinite(float(v))}
+            stream_scalars(self.dir, self._max_step or 0, numbers, final=True)
         return path
 
     # -------------------------------------------------------------- checkpoints
@@ -124,6 +133,20 @@ class Run:
         return (self.dir / "checkpoints" / name).is_file()
 
 
+def stream_scalars(run_dir: Path, step: int, scalars: dict[str, float], final: bool = False) -> None:
+    """Append `{"run_dir", "step", "final", "scalars"}` as a JSON line to $CHARCTL_METRICS_STREAM (if set)."""
+    path = os.environ.get(METRICS_STREAM_ENV)
+    if not path or not scalars:
+        return
+    line = json.dumps({"run_dir": str(run_dir), "step": step, "final": final, "scalars": scalars})
+    with contextlib.suppress(OSError), open(path, "a") as fh:
+        fh.write(line + "\n")
+
+
+def _is_number(v: Any) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool)
+
+
 def new_run(cfg, experiment: str | None = None) -> Run:
     """Create `<output_root>/<experiment>/<timestamp>/` and write the resolved config there."""
     from charctl.config import to_yaml
@@ -134,16 +157,26 @@ def new_run(cfg, experiment: str | None = None) -> Run:
     check_writable_dir(root, "output_root")
     stamp = datetime.now().strftime("%Y-%m-%d_%H-%M-%S")
     run_dir = root / stamp
-    n = 1
-    while run_dir.exists():  # two runs in the same second (multirun, tests)
-        run_dir = root / f"{stamp}_{n}"
-        n += 1
     try:
-        run_dir.mkdir(parents=True)
+        run_dir = _make_unique_dir(root, stamp)
         atomic_write_text(run_dir / "config.yaml", to_yaml(cfg))
     except OSError as exc:
         raise os_error(exc, "cannot create the run directory", run_dir) from None
     return Run(dir=run_dir, experiment=experiment, cfg=cfg)
+
+
+def _make_unique_dir(root: Path, stamp: str) -> Path:
+    """Create `root/stamp`, or `stamp_1`, `stamp_2` ... when taken: two runs in the same second
+    (multirun, tests, jobs started side by side by another process) each get their own folder."""
+    root.mkdir(parents=True, exist_ok=True)
+    n = 0
+    while True:
+        run_dir = root / (stamp if n == 0 else f"{stamp}_{n}")
+        try:
+            run_dir.mkdir()
+            return run_dir
+        except FileExistsError:
+            n += 1
 
 
 def _dir_problem(path: Path) -> str | None:

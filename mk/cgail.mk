@@ -22,7 +22,7 @@ repro-cgail-paper: install ## cgail: the paper's runs (10 skills, AMP, LS ablati
 	$(CHARCTL) train cgail scale=paper output_root=$(CGAIL_PAPER)/cgail
 	$(CHARCTL) train cgail scale=paper cgail.conditional=false output_root=$(CGAIL_PAPER)/amp
 	$(CHARCTL) train cgail scale=paper cgail.class_loss=ls output_root=$(CGAIL_PAPER)/ls
-	$(CHARCTL) train cgail scale=paper -m "use_skills=[walk],[walk,run,right_kick],[walk,run,jump,right_punch,right_kick,left_kick]" output_root=$(CGAIL_PAPER)/skills
+	$(CHARCTL) train cgail scale=paper -m "use_skills=[walk],[walk,run,right_kick],[walk,run,jump,right_punch,right_kick,left_kick]" output_root=$(CGAIL_PAPER)/skills $(LAUNCH)
 	C=$$(ls -d $(CGAIL_PAPER)/cgail/cgail/*/ | tail -1); A=$$(ls -d $(CGAIL_PAPER)/amp/cgail/*/ | tail -1); L=$$(ls -d $(CGAIL_PAPER)/ls/cgail/*/ | tail -1); \
 	rm -f $(CGAIL_PAPER)/report.md; \
 	$(CHARCTL) eval $$C $$A --dtw --confusion --switch right_kick left_kick -k 8 -o $(CGAIL_PAPER) && \

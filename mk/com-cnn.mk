@@ -17,8 +17,8 @@ repro-com-cnn: install ## com-cnn: train the paper's best setting + history-only
 	@echo "report: $(COMCNN)/report.md"
 
 repro-com-cnn-table4: install ## com-cnn: the paper's four Table 4 settings (history 15/90, kernel 2/10, 1 or 3 layers) at scale=small, one table
-	$(CHARCTL) train com-cnn scale=small -m data.history=15 model.kernel=2 "model.channels=[32],[8,16,32]" output_root=$(COMCNN_RUNS)/table4
-	$(CHARCTL) train com-cnn scale=small -m data.history=90 model.kernel=10 "model.channels=[128],[32,64,128]" output_root=$(COMCNN_RUNS)/table4
+	$(CHARCTL) train com-cnn scale=small -m data.history=15 model.kernel=2 "model.channels=[32],[8,16,32]" output_root=$(COMCNN_RUNS)/table4 $(LAUNCH)
+	$(CHARCTL) train com-cnn scale=small -m data.history=90 model.kernel=10 "model.channels=[128],[32,64,128]" output_root=$(COMCNN_RUNS)/table4 $(LAUNCH)
 	rm -f $(COMCNN)/table4/report.md; \
 	$(CHARCTL) eval $$(ls -d $(COMCNN_RUNS)/table4/com-cnn/*/ | tail -4) --pose-error -o $(COMCNN)/table4
 	@echo "report: $(COMCNN)/table4/report.md"

@@ -9,8 +9,8 @@ HOPPER_GA_RUNTIME ?= local
 
 repro-hopper-ga: install ## hopper-ga: 2/5/7 m/s (beta 0), 10 m/s (beta 0.2, 0.7), 5 m/s beta 0.5 curve -> report.md
 	rm -rf $(HOPPER_GA_OUT)
-	$(CHARCTL) train hopper-ga -m speed=2,5,7 beta=0 scale=$(HOPPER_GA_SCALE) runtime.kind=$(HOPPER_GA_RUNTIME) output_root=$(HOPPER_GA_OUT)/runs
-	$(CHARCTL) train hopper-ga -m speed=10 beta=0.2,0.7 scale=$(HOPPER_GA_SCALE) runtime.kind=$(HOPPER_GA_RUNTIME) output_root=$(HOPPER_GA_OUT)/runs
+	$(CHARCTL) train hopper-ga -m speed=2,5,7 beta=0 scale=$(HOPPER_GA_SCALE) runtime.kind=$(HOPPER_GA_RUNTIME) output_root=$(HOPPER_GA_OUT)/runs $(LAUNCH)
+	$(CHARCTL) train hopper-ga -m speed=10 beta=0.2,0.7 scale=$(HOPPER_GA_SCALE) runtime.kind=$(HOPPER_GA_RUNTIME) output_root=$(HOPPER_GA_OUT)/runs $(LAUNCH)
 	$(CHARCTL) train hopper-ga speed=5 beta=0.5 scale=$(HOPPER_GA_SCALE) runtime.kind=$(HOPPER_GA_RUNTIME) output_root=$(HOPPER_GA_OUT)/runs
 	$(PY) -m charctl.experiments.hopper_ga.evaluate $(HOPPER_GA_OUT)/runs/hopper-ga -o $(HOPPER_GA_OUT) --media
 	@echo "report: $(HOPPER_GA_OUT)/report.md"

@@ -13,15 +13,31 @@ def _schema(experiment: str) -> type:
     return load(experiment).config_class()
 
 
+LAUNCHERS = ("basic", "ray")
+
+
 def train_command(
-    experiment: str, overrides: list[str], resume: Path | None = None, multirun: bool = False
+    experiment: str,
+    overrides: list[str],
+    resume: Path | None = None,
+    multirun: bool = False,
+    launcher: str = "basic",
+    address: str | None = None,
+    cpus_per_job: float = 1.0,
+    gpus_per_job: float = 0.0,
 ) -> list[Path]:
-    """Compose/validate the config, create (or reopen) the run directory, hand over to the experiment."""
+    """Compose/validate the config, create (or reopen) the run directory, hand over to the experiment.
+
+    `launcher="ray"` runs the job(s) - every combination of a `-m` sweep - side by side on Ray
+    (charctl.launch.ray_jobs) instead of one after another in this process."""
     from charctl.config import check_experiment, compose_config, expand_multirun
     from charctl.experiments import load
     from charctl.runs import new_run, open_run, run_experiment
 
     check_experiment(experiment)
+    _check_launcher(launcher, address, resume, (cpus_per_job, gpus_per_job) != (1.0, 0.0))
+    if launcher == "ray":
+        return _train_on_ray(experiment, overrides, multirun, address, cpus_per_job, gpus_per_job)
     train_fn = load(experiment).entry("train")
     schema = _schema(experiment)
     if resume is not None:
@@ -47,6 +63,33 @@ def train_command(
         _run(train_fn, run)
         dirs.append(run.dir)
     return dirs
+
+
+def _check_launcher(launcher: str, address: str | None, resume: Path | None, resources: bool = False) -> None:
+    """One-line errors for options that do not go together (`resources`: --cpus/--gpus-per-job given)."""
+    if launcher not in LAUNCHERS:
+        raise CharctlError(f"unknown launcher {launcher!r}; choose one of: {', '.join(LAUNCHERS)}")
+    if address and launcher != "ray":
+        raise CharctlError("--address needs --launcher ray")
+    if resources and launcher != "ray":
+        raise CharctlError("--cpus-per-job / --gpus-per-job need --launcher ray")
+    if resume is not None and launcher != "basic":
+        raise CharctlError("--resume runs in this process; drop --launcher ray")
+
+
+def _train_on_ray(
+    experiment: str, overrides: list[str], multirun: bool, address: str | None, cpus: float, gpus: float
+) -> list[Path]:
+    """Every job on Ray; the run directories of the finished ones, or a one-line error if any failed."""
+    from charctl.config import expand_multirun
+    from charctl.launch.ray_jobs import Resources, run_on_ray, summary_error
+
+    jobs = expand_multirun(overrides) if multirun else [overrides]
+    results = run_on_ray(experiment, jobs, address=address or None, resources=Resources(cpus, gpus))
+    error = summary_error(results)
+    if error is not None:
+        raise error
+    return [Path(r.run_dir) for r in results]
 
 
 def _run(train_fn, run) -> None:

@@ -15,6 +15,9 @@ references, imported only when called:
 `charctl eval` / `charctl export`; the CLI builds each experiment's option set from them.
 `provides` names optional capabilities another experiment may use through the registry (never by
 importing the provider), e.g. cgail's `push_rollout` is srb's full-body push baseline.
+`tune_metrics` names the scalars the experiment logs as it trains (TensorBoard names, or
+metrics.json keys for the final value) that `charctl tune` can optimise, each with its direction
+("max" or "min"); the first is the default `--metric`.
 
     from charctl.experiments import load
     exp = load("srb")
@@ -78,6 +81,7 @@ class Experiment:
     export_options: tuple[Option, ...] = ()
     provides: Mapping[str, str] = field(default_factory=dict)  # capability -> module implementing it
     eval_accepts: tuple[str, ...] = ()  # capabilities whose providers' runs `eval` also takes as targets
+    tune_metrics: Mapping[str, str] = field(default_factory=dict)  # logged scalar -> "max" | "min" (charctl tune)
 
     def entry(self, role: str) -> Callable[..., Any]:
         """The callable behind `role` (one of ROLES); a one-line error if the experiment has none."""

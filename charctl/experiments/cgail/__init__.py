@@ -39,4 +39,5 @@ EXPERIMENT = Experiment(
         SECONDS,
     ),
     provides={"push_rollout": f"{_PKG}.push"},
+    tune_metrics={"train/episode_length": "max", "train/r_style": "max"},  # steps before a fall; style reward r_S
 )

@@ -31,4 +31,5 @@ EXPERIMENT = Experiment(
         VIDEO,
         SECONDS,
     ),
+    tune_metrics={"test/joint_angle_deg": "min", "test/loss": "min"},  # held-out pose error (teacher-forced)
 )

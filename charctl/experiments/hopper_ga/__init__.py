@@ -25,4 +25,5 @@ EXPERIMENT = Experiment(
         OUT,
     ),
     export_options=(BVH, VIDEO, SECONDS, FPS),
+    tune_metrics={"fitness/best_so_far": "min", "fitness/mean": "min"},  # the GA minimises its evaluation (best so far)
 )

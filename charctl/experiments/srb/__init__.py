@@ -23,4 +23,5 @@ EXPERIMENT = Experiment(
     ),
     export_options=(VIDEO, SECONDS),
     eval_accepts=("push_rollout",),
+    tune_metrics={"rollout/episode_length": "max", "rollout/episode_return": "max"},  # survival: steps before a fall
 )

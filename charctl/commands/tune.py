@@ -1,0 +1,130 @@
+"""`charctl tune EXP key=choice(a,b) key=range(lo,hi) key=loguniform(lo,hi) [key=value ...] --trials N`.
+
+Everything that can be checked is checked before Ray starts: the search-space syntax, the metric
+(declared by the experiment, or any logged scalar with an explicit --mode), the options, and the
+config at every bound of every searched key (so an unknown key or an out-of-range bound is a
+one-line error, not N failed trials). The search itself is charctl.launch.tune.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+from charctl.errors import CharctlError
+
+MODES = ("max", "min")
+
+
+@dataclass(frozen=True)
+class TuneOptions:
+    """The command-line options of `charctl tune`."""
+
+    metric: str | None = None
+    mode: str | None = None
+    trials: int = 8
+    address: str | None = None
+    cpus: float = 1.0
+    gpus: float = 0.0
+    grace_period: int = 1
+    max_reports: int | None = None
+    seed: int = 0
+
+
+def resolve_metric(experiment: str, declared: dict[str, str], metric: str | None, mode: str | None) -> tuple[str, str]:
+    """(metric, mode): the experiment's first declared metric by default; an undeclared one needs --mode."""
+    if mode is not None and mode not in MODES:
+        raise CharctlError(f"--mode must be max or min, got {mode!r}")
+    if metric is None:
+        if not declared:
+            raise CharctlError(f"{experiment} declares no metric to tune; give --metric NAME --mode max|min")
+        metric = next(iter(declared))
+    if mode is None:
+        if metric not in declared:
+            names = ", ".join(declared) or "none"
+            raise CharctlError(
+                f"--metric {metric!r} is not one {experiment} declares ({names}); give --mode max|min with it"
+            )
+        mode = declared[metric]
+    return metric, mode
+
+
+def check_options(opts: TuneOptions) -> None:
+    if opts.trials < 1:
+        raise CharctlError(f"--trials must be >= 1, got {opts.trials}")
+    if not opts.cpus > 0:
+        raise CharctlError(f"--cpus-per-trial must be > 0, got {opts.cpus:g}")
+    if opts.gpus < 0:
+        raise CharctlError(f"--gpus-per-trial must be >= 0, got {opts.gpus:g}")
+    if opts.grace_period < 1:
+        raise CharctlError(f"--grace-period must be >= 1, got {opts.grace_period}")
+    if opts.max_reports is not None and opts.max_reports < opts.grace_period:
+        raise CharctlError(f"--max-reports must be >= --grace-period ({opts.grace_period}), got {opts.max_reports}")
+
+
+def validate_space(experiment: str, fixed: list[str], dims, schema: type):
+    """Compose the config with every bound of every searched key; the fixed-overrides config."""
+    from charctl.config import compose_config
+
+    cfg = compose_config(experiment, fixed, schema)
+    for dim in dims:
+        for value in dim.extremes():
+            try:
+                compose_config(experiment, [*fixed, f"{dim.key}={value}"], schema)
+            except CharctlError as exc:
+                raise CharctlError(f"{dim.key}={value} (a value the search can pick): {exc}") from None
+    return cfg
+
+
+def tune_command(experiment: str, overrides: list[str], opts: TuneOptions) -> Path:
+    """Check everything, run the search, print the table and the best trial's command line."""
+    import os
+
+    from charctl.config import check_experiment
+    from charctl.experiments import load
+    from charctl.launch.search_space import parse_overrides
+    from charctl.launch.tune import TuneSetup, make_out_dir, run_tune
+    from charctl.runs import check_writable_dir
+
+    check_experiment(experiment)
+    exp = load(experiment)
+    check_options(opts)
+    fixed, dims = parse_overrides(overrides)
+    if not dims:
+        raise CharctlError(
+            "nothing to search: give at least one key=choice(a,b), key=range(lo,hi) or key=loguniform(lo,hi)"
+        )
+    metric, mode = resolve_metric(experiment, dict(exp.tune_metrics), opts.metric, opts.mode)
+    cfg = validate_space(experiment, fixed, dims, exp.config_class())
+    check_writable_dir(cfg.output_root, "output_root")
+    out = make_out_dir(cfg.output_root, experiment)
+    fixed = [o for o in fixed if o.split("=", 1)[0].lstrip("+~") != "output_root"]  # trials: <out>/runs
+    setup = TuneSetup(
+        experiment=experiment,
+        fixed=tuple(fixed),
+        dims=tuple(dims),
+        metric=metric,
+        mode=mode,
+        trials=opts.trials,
+        out_dir=str(out),
+        report_keys=tuple(k for k in exp.tune_metrics if k != metric),
+        address=opts.address or None,
+        cpus=opts.cpus,
+        gpus=opts.gpus,
+        grace_period=opts.grace_period,
+        max_reports=opts.max_reports,
+        seed=opts.seed,
+        cwd=os.getcwd(),
+    )
+    records, best = run_tune(setup)
+    print((out / "trials.md").read_text(), end="")
+    print(f"plot: {out / 'tune.png'}")
+    if best is None:
+        raise CharctlError(f"no trial reported {metric!r}; see {out / 'trials.md'}")
+    print(f"best: trial {best.number + 1}, {metric} = {best.metric:.6g} -> {out / 'best.yaml'}")
+    command = (out / "best.yaml").read_text().splitlines()[2].lstrip("# ").strip()
+    print(f"rerun: {command}")
+    failed = [r for r in records if r.state == "failed"]
+    if failed:
+        print(f"note: {len(failed)} trial(s) failed; first: {failed[0].message}")
+    return out
