@@ -69,13 +69,19 @@ def doc_commands() -> list[DocCommand]:
     for page in PAGES:
         rel = str(page.relative_to(REPO))
         in_block = False
+        pending: tuple[int, str] | None = None  # a command continued with a trailing backslash
         for no, raw in enumerate(page.read_text().splitlines(), 1):
             if raw.lstrip().startswith("```"):
                 in_block = not in_block
                 continue
             if in_block:
                 line = raw.strip().removeprefix("$ ")
-                if line.startswith("charctl "):
+                if pending is not None:
+                    no, line = pending[0], pending[1] + " " + line
+                    pending = None
+                if line.startswith("charctl ") and line.endswith("\\"):
+                    pending = (no, line[:-1].rstrip())
+                elif line.startswith("charctl "):
                     out.append(DocCommand(rel, no, _strip_comment(line)))
             else:
                 for span in re.findall(r"`(charctl [^`]+)`", raw):
@@ -93,7 +99,7 @@ def skip_reason(cmd: DocCommand) -> str | None:
         return "an abbreviated form in prose, not a command"
     if "~/" in text or "data.bvh_dir=" in text:
         return "needs the user's own BVH folder"
-    if "runtime.address=" in text:
+    if "runtime.address=" in text or re.search(r"--address\s+(?!none\b)\S", text):
         return "joins a running Ray cluster"
     if len(cmd.argv) < 2 and cmd.argv[:1] != ["play"]:
         return "names a command, not a command line"
@@ -117,6 +123,22 @@ def needs_missing_gpu(cmd: DocCommand) -> bool:
 
 
 # ---------------------------------------------------------------------------- fast tier
+LAUNCHER_FLAGS = ("--launcher", "--address", "--cpus-per-job", "--gpus-per-job")
+
+
+def _without_launcher_flags(args: list[str]) -> list[str]:
+    """The overrides of a train command: the launcher's flags and their values removed."""
+    out, skip = [], False
+    for a in args:
+        if skip:
+            skip = False
+        elif a in LAUNCHER_FLAGS:
+            skip = True
+        elif not a.startswith(tuple(f + "=" for f in LAUNCHER_FLAGS)):
+            out.append(a)
+    return out
+
+
 def _jobs(argv: list[str]) -> tuple[str, list[list[str]]] | None:
     """(experiment, [overrides of each job]) of a `train` command without --resume, else None."""
     from charctl.config import expand_multirun
@@ -124,7 +146,7 @@ def _jobs(argv: list[str]) -> tuple[str, list[list[str]]] | None:
     if len(argv) < 2 or argv[0] != "train" or "--resume" in argv:
         return None
     multirun = "-m" in argv or "--multirun" in argv
-    overrides = [a for a in argv[2:] if a not in ("-m", "--multirun")]
+    overrides = [a for a in _without_launcher_flags(argv[2:]) if a not in ("-m", "--multirun")]
     return argv[1], (expand_multirun(overrides) if multirun else [overrides])
 
 
@@ -255,7 +277,7 @@ def smoke_argv(cmd: DocCommand, runs, cwd: Path) -> list[str]:
     if command == "train" and resume:
         if target in RESUME_TOTAL and not any(a.startswith("train.total_samples=") for a in out):
             out.append(f"train.total_samples={RESUME_TOTAL[target]}")
-    elif command == "train":
+    elif command in ("train", "tune"):
         out += ["scale=smoke", f"output_root={runs.work / 'outputs'}"]
     elif command in ("eval", "export") and target == "motion-matching":
         out += ["scale=smoke", f"output_root={runs.work / 'outputs'}"]
