@@ -122,9 +122,12 @@ class Run:
 
     def load_checkpoint(self, signature: dict | None = None, name: str = "last.pt") -> dict:
         payload = load_checkpoint(self.dir / "checkpoints" / name, self.experiment, signature, payload=True)
-        if self.resumed and payload.get("tb_step") is not None:
-            self._purge_step = int(payload["tb_step"]) + 1
-            self._max_step = int(payload["tb_step"])
+        if self.resumed and "tb_step" in payload:
+            # tb_step None: nothing was logged before this checkpoint, so every step in tb/ is stale
+            # (a killed process logged past it): purge from step 0.
+            last = payload["tb_step"]
+            self._purge_step = 0 if last is None else int(last) + 1
+            self._max_step = None if last is None else int(last)
             if self._writer is not None:  # created before the checkpoint was read: reopen with purge_step
                 self.close()
         return payload["state"]

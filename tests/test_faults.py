@@ -636,3 +636,24 @@ def test_exit_code_of_typer_exit_is_kept(tmp_path):
     )
     res = subprocess.run([sys.executable, "-c", code], cwd=REPO, capture_output=True, text=True, timeout=LIMIT)
     assert res.returncode == 5, res.stderr
+
+
+@pytest.mark.parametrize("logged_before_checkpoint", [False, True])
+def test_resume_hides_tensorboard_steps_logged_after_the_checkpoint(tmp_path, logged_before_checkpoint):
+    """A killed process logged past its last checkpoint; the resumed run logs those steps again and
+    TensorBoard shows each once — also when nothing was logged before that checkpoint (tb_step None)."""
+    from charctl.runs import Run
+
+    first = Run(dir=tmp_path, experiment="com-cnn", cfg=None)
+    if logged_before_checkpoint:
+        first.log_scalars({"train/loss": 1.0}, 320)
+    first.save_checkpoint({"step": 10})
+    first.log_scalars({"train/loss": 2.0}, 640)  # after the checkpoint: the kill loses its state
+    first.close()
+    resumed = Run(dir=tmp_path, experiment="com-cnn", cfg=None, resumed=True)
+    resumed.load_checkpoint()
+    resumed.log_scalars({"train/loss": 3.0}, 640)
+    resumed.log_scalars({"train/loss": 4.0}, 960)
+    resumed.close()
+    expected = [320, 640, 960] if logged_before_checkpoint else [640, 960]
+    assert tensorboard_steps(tmp_path)["train/loss"] == expected
