@@ -91,3 +91,22 @@ def test_mlp_spectral_norm_flag():
     net = mlp(3, [4], 2, spectral_norm=True)
     lins = [m for m in net if isinstance(m, torch.nn.Linear)]
     assert all(hasattr(l, "parametrizations") for l in lins)
+
+
+def test_ppo_losses_stay_finite_when_the_log_ratio_explodes():
+    """A sample whose log-probability moved by 100 nats: ratio clamped to exp(20), losses and KL finite,
+    and the other samples' terms unchanged (hand values: ratio exp(0.1), A = 1 -> surrogate 1.1052)."""
+    import math
+
+    from charctl.rl.ppo import LOG_RATIO_LIMIT, ppo_losses
+
+    new = torch.tensor([0.1, 100.0, -100.0])
+    old = torch.zeros(3)
+    adv = torch.tensor([1.0, -1.0, 1.0])
+    v = torch.zeros(3)
+    out = ppo_losses(new, old, adv, v, v, v, clip=0.2)
+    assert all(torch.isfinite(x) for x in out.values())
+    big = math.exp(LOG_RATIO_LIMIT)
+    # min(rho A, clip(rho) A): 1.1052 -> min(1.1052, 1.2) = 1.1052; -big vs -1.2 -> -big; exp(-20) ~ 0 vs 0.8 -> ~0
+    expected = -(math.exp(0.1) - big + math.exp(-LOG_RATIO_LIMIT)) / 3
+    assert float(out["policy"]) == pytest.approx(expected, rel=1e-5)

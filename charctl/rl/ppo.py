@@ -60,6 +60,9 @@ class ActorCritic(nn.Module):
         return action, logp, value
 
 
+LOG_RATIO_LIMIT = 20.0  # |log pi_new - log pi_old| above this is clamped (exp(20) = 4.9e8, finite in float32)
+
+
 def ppo_losses(
     new_logp: torch.Tensor,
     old_logp: torch.Tensor,
@@ -75,7 +78,10 @@ def ppo_losses(
     L_pi = -E[min(rho A, clip(rho, 1-eps, 1+eps) A)], rho = exp(new_logp - old_logp);
     L_V = E[(V - R)^2] (or the max with the clipped version when value_clip > 0).
     """
-    ratio = torch.exp(new_logp - old_logp)
+    # The log-ratio is clamped before exp: one sample whose log-probability moved by > 88 nats within an
+    # update would otherwise make the ratio 0 or inf, the loss or approx_kl inf, and end the run as
+    # diverged. Inside +-20 nothing changes; a sample beyond it contributes no gradient.
+    ratio = torch.exp(torch.clamp(new_logp - old_logp, -LOG_RATIO_LIMIT, LOG_RATIO_LIMIT))
     surr = torch.min(ratio * advantages, torch.clamp(ratio, 1.0 - clip, 1.0 + clip) * advantages)
     policy_loss = -surr.mean()
     if value_clip > 0:
