@@ -194,6 +194,9 @@ def run_on_policy(learner: Learner, run, settings: RunnerSettings) -> dict:
             if stop.requested:
                 break
     if stop.requested:
+        # metrics.json describes the run as it stands (replacing e.g. a diverged entry of an earlier segment)
+        summary = learner.summary(stats) if stats else {}
+        run.write_metrics({"interrupted": True, "iterations": learner.iteration, "samples": learner.samples, **summary})
         run.close()
         message = f"interrupted at iteration {learner.iteration}: checkpoint written; continue with --resume {run.dir}"
         raise stop.interrupted(message)
