@@ -5,7 +5,12 @@ CGAIL_PAPER := outputs/repro/cgail-paper
 # 150 Hz physics with 0.05 joint armature (docs/cgail.md, "Throughput"): reproduce them at their rate.
 CGAIL_300HZ := env.physics_hz=300 env.armature=0.01
 
-.PHONY: repro-cgail-small repro-cgail-paper demo-cgail
+.PHONY: repro-cgail-small repro-cgail-10skill repro-cgail-paper demo-cgail
+
+repro-cgail-10skill: install ## cgail: the shipped ten-skill run (pretrained/README.md; ~1.5 h on 2 cores, stop with Ctrl-C), evaluated
+	$(CHARCTL) train cgail scale=small "use_skills=[]" reward.class_form=logratio train.total_samples=27000000 train.checkpoint_every=20 seed=1 output_root=$(CGAIL_SMALL)/ten
+	C=$$(ls -d $(CGAIL_SMALL)/ten/cgail/*/ | tail -1); \
+	$(CHARCTL) eval $$C --survival 5 -k 64 -o $(CGAIL_SMALL)/ten-eval && $(CHARCTL) eval $$C --confusion -k 16 -o $(CGAIL_SMALL)/ten-eval
 
 repro-cgail-small: install ## cgail: the shipped policies' runs (pretrained/README.md: cGAIL 3 skills, AMP and tracking walk; ~3 h on 2 cores), evaluated
 	$(CHARCTL) train cgail scale=small train.total_samples=8000000 $(CGAIL_300HZ) seed=1 output_root=$(CGAIL_SMALL)/cgail
