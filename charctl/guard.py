@@ -72,6 +72,19 @@ def check_finite(
         raise diverged(bad, where=where, checkpoint=checkpoint)
 
 
+MAX_RATIO_CLAMPED = 0.01  # share of PPO samples whose log-ratio left +-LOG_RATIO_LIMIT within one update
+
+
+def check_policy_step(stats: dict, where: str = "", checkpoint: str | Path | None = None) -> None:
+    """Raise `Diverged` when PPO's log-ratio clamp (charctl.rl.ppo) caught more than 1 % of an update's
+    samples: an isolated outlier is absorbed by the clamp, a policy that jumps everywhere has diverged
+    (e.g. a learning rate of 10), even though every number stays finite."""
+    share = float(stats.get("losses/ratio_clamped", 0.0))
+    if share > MAX_RATIO_CLAMPED:
+        what = f"the policy's log-probability moved by > 20 nats on {100 * share:.1f} % of samples in one update"
+        raise diverged(what, where=where, checkpoint=checkpoint)
+
+
 def diverged(what: str, where: str = "", checkpoint: str | Path | None = None) -> Diverged:
     """The `Diverged` exception with the standard message."""
     at = f" at {where}" if where else ""

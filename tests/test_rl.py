@@ -110,3 +110,19 @@ def test_ppo_losses_stay_finite_when_the_log_ratio_explodes():
     # min(rho A, clip(rho) A): 1.1052 -> min(1.1052, 1.2) = 1.1052; -big vs -1.2 -> -big; exp(-20) ~ 0 vs 0.8 -> ~0
     expected = -(math.exp(0.1) - big + math.exp(-LOG_RATIO_LIMIT)) / 3
     assert float(out["policy"]) == pytest.approx(expected, rel=1e-5)
+
+
+def test_ratio_clamp_share_stops_a_jumping_policy():
+    """0.5 % of samples beyond the clamp is an outlier the clamp absorbs; 2 % is divergence (exit 3)."""
+    from charctl.errors import Diverged
+    from charctl.guard import check_policy_step
+    from charctl.rl.ppo import ppo_losses
+
+    new = torch.zeros(200)
+    new[:1] = 30.0  # 1 of 200 = 0.5 %
+    z = torch.zeros(200)
+    share = float(ppo_losses(new, z, z, z, z, z, clip=0.2)["ratio_clamped"])
+    assert share == pytest.approx(0.005)
+    check_policy_step({"losses/ratio_clamped": share})
+    with pytest.raises(Diverged, match="20 nats on 2.0 %"):
+        check_policy_step({"losses/ratio_clamped": 0.02}, where="iteration 3")

@@ -81,7 +81,8 @@ def ppo_losses(
     # The log-ratio is clamped before exp: one sample whose log-probability moved by > 88 nats within an
     # update would otherwise make the ratio 0 or inf, the loss or approx_kl inf, and end the run as
     # diverged. Inside +-20 nothing changes; a sample beyond it contributes no gradient.
-    ratio = torch.exp(torch.clamp(new_logp - old_logp, -LOG_RATIO_LIMIT, LOG_RATIO_LIMIT))
+    log_ratio = new_logp - old_logp
+    ratio = torch.exp(torch.clamp(log_ratio, -LOG_RATIO_LIMIT, LOG_RATIO_LIMIT))
     surr = torch.min(ratio * advantages, torch.clamp(ratio, 1.0 - clip, 1.0 + clip) * advantages)
     policy_loss = -surr.mean()
     if value_clip > 0:
@@ -91,7 +92,14 @@ def ppo_losses(
         value_loss = ((values - returns) ** 2).mean()
     clip_frac = ((ratio - 1.0).abs() > clip).float().mean()
     approx_kl = ((ratio - 1.0) - torch.log(ratio)).mean()
-    return {"policy": policy_loss, "value": value_loss, "clip_frac": clip_frac, "approx_kl": approx_kl}
+    ratio_clamped = (log_ratio.abs() > LOG_RATIO_LIMIT).float().mean()  # charctl.guard stops above 1 %
+    return {
+        "policy": policy_loss,
+        "value": value_loss,
+        "clip_frac": clip_frac,
+        "approx_kl": approx_kl,
+        "ratio_clamped": ratio_clamped,
+    }
 
 
 def make_adam(params, lr: float) -> torch.optim.Adam:

@@ -28,7 +28,7 @@ from typing import Protocol
 import torch
 
 from charctl.errors import CharctlError
-from charctl.guard import BlowupMonitor, check_finite
+from charctl.guard import BlowupMonitor, check_finite, check_policy_step
 
 
 class Learner(Protocol):
@@ -143,7 +143,9 @@ def restore_rng_states(state: dict) -> str | None:
 def _stop_if_diverged(learner: Learner, run, stats: dict[str, float]) -> None:
     """Raise `Diverged` (before any checkpoint of this iteration is written) on a NaN/inf."""
     try:
-        check_finite(stats, *learner.modules(), where=f"iteration {learner.iteration}", checkpoint=run.checkpoint_path)
+        where = f"iteration {learner.iteration}"
+        check_finite(stats, *learner.modules(), where=where, checkpoint=run.checkpoint_path)
+        check_policy_step(stats, where=where, checkpoint=run.checkpoint_path)
     except CharctlError as exc:
         run.log_scalars({k: v for k, v in stats.items() if math.isfinite(v)}, learner.samples)
         run.write_metrics(
