@@ -115,18 +115,16 @@ def blended_class_reward(
     classifier is certain, and separates P(c) = 0.10 from 0.15 by 0.4 where ``prob`` gives 0.05 — the
     contrast ten skills need while the classifier is still unsure on policy motion.
     """
-    if form in ("prob", "logratio"):
-        p_a = probs.gather(-1, cmd_a.unsqueeze(-1)).squeeze(-1)
-        p_b = probs.gather(-1, cmd_b.unsqueeze(-1)).squeeze(-1)
-        if form == "logratio":
-            p_a = torch.clamp(torch.log(num_classes * p_a.clamp_min(1e-12)), min=-1.0)
-            p_b = torch.clamp(torch.log(num_classes * p_b.clamp_min(1e-12)), min=-1.0)
-        return (1.0 - w) * p_a + w * p_b
-    if form != "l1":
+    if form not in ("l1", "prob", "logratio"):
         raise ValueError(f"unknown class reward form {form!r}")
-    ca = F.one_hot(cmd_a, num_classes).to(probs.dtype)
-    cb = F.one_hot(cmd_b, num_classes).to(probs.dtype)
-    return (1.0 - w) * class_reward(probs, ca) + w * class_reward(probs, cb)
+
+    def reward_for(cmd: torch.Tensor) -> torch.Tensor:
+        if form == "l1":
+            return class_reward(probs, F.one_hot(cmd, num_classes).to(probs.dtype))
+        p = probs.gather(-1, cmd.unsqueeze(-1)).squeeze(-1)
+        return p if form == "prob" else torch.clamp(torch.log(num_classes * p.clamp_min(1e-12)), min=-1.0)
+
+    return (1.0 - w) * reward_for(cmd_a) + w * reward_for(cmd_b)
 
 
 class ReplayBuffer:
