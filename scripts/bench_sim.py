@@ -14,8 +14,6 @@ from __future__ import annotations
 import argparse
 import time
 
-import numpy as np
-
 from charctl.sim import CONTROL_HZ, JOINT_ARMATURE, PHYSICS_HZ
 
 
@@ -49,32 +47,13 @@ def batched(
     seed: int = 0,
     armature: float = JOINT_ARMATURE,
 ):
-    from charctl.motion.library import load_clip
+    """(control steps/s, blow-ups, mean tracking error rad, substeps) of `seconds` of noisy clip tracking."""
     from charctl.sim.batch import BatchedHumanoid, SimSettings
-    from charctl.sim.humanoid import clip_to_qpos_qvel
+    from charctl.sim.tracking import track_clip_with_noise
 
-    clip = load_clip("walk").resample(control_hz)
-    qpos, qvel = clip_to_qpos_qvel(clip)
-    rng = np.random.default_rng(seed)
     sim = BatchedHumanoid(envs, SimSettings(physics_hz=physics_hz, control_hz=control_hz, armature=armature))
-    ids = np.arange(envs)
-
-    def reset(idx):
-        sim.set_state(idx, np.repeat(qpos[:1], len(idx), 0), np.repeat(qvel[:1], len(idx), 0))
-
-    sim.reset_fn = reset
-    reset(ids)
-    steps, t0, k, err = 0, time.perf_counter(), 0, []
-    while time.perf_counter() - t0 < seconds:
-        target = qpos[k % len(qpos), 7:] + noise * rng.standard_normal((envs, qpos.shape[1] - 7))
-        sim.step(target)
-        err.append(np.abs(sim.qpos[:, 7:] - qpos[k % len(qpos), 7:]).mean())
-        steps += 1
-        k += 1
-        if k % int(2 * control_hz) == 0:
-            reset(ids)
-    dt = time.perf_counter() - t0
-    return steps * envs / dt, sim.unstable_count, float(np.mean(err)), sim.substeps
+    r = track_clip_with_noise(sim, noise=noise, max_seconds=seconds, episode_steps=int(2 * control_hz), seed=seed)
+    return r.control_steps * envs / r.seconds, r.blowups, r.mean_error, sim.substeps
 
 
 def main() -> None:

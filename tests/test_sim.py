@@ -38,19 +38,11 @@ def _noisy_tracking_blowups(physics_hz: float, armature: float, seconds: float =
     """PD-track the walk clip from RSI with 0.1 rad target noise (64 envs, 2-s episodes).
 
     Returns (blow-ups, mean |q - q_ref| in rad)."""
-    clip = load_clip("walk").resample(30.0)
-    qpos, qvel = clip_to_qpos_qvel(clip)
+    from charctl.sim.tracking import track_clip_with_noise
+
     sim = BatchedHumanoid(64, SimSettings(physics_hz=physics_hz, armature=armature, nthread=1))
-    ids = np.arange(64)
-    sim.reset_fn = lambda idx: sim.set_state(idx, qpos[np.zeros(len(idx), int)], qvel[np.zeros(len(idx), int)])
-    sim.reset_fn(ids)
-    rng, err = np.random.default_rng(0), []
-    for k in range(int(seconds * 30)):
-        sim.step(qpos[k % len(qpos), 7:] + 0.1 * rng.standard_normal((64, qpos.shape[1] - 7)))
-        err.append(np.abs(sim.qpos[:, 7:] - qpos[k % len(qpos), 7:]).mean())
-        if k % 60 == 59:
-            sim.reset_fn(ids)
-    return sim.unstable_count, float(np.mean(err))
+    r = track_clip_with_noise(sim, noise=0.1, max_steps=int(seconds * 30), episode_steps=60, seed=0)
+    return r.blowups, r.mean_error
 
 
 def test_armature_keeps_150hz_stable():
