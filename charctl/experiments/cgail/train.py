@@ -121,7 +121,6 @@ def agent_state(agent: Agent, env: CgailEnv | None = None) -> dict:
         "iteration": agent.iteration,
         "samples": agent.samples,
         "unstable_total": agent.unstable_total,
-        "torch_rng": torch.get_rng_state(),
         "gen_rng": agent.generator.get_state(),
         "skills": [s.name for s in agent.skills],
         "clips": [s.clip_name for s in agent.skills],
@@ -143,7 +142,6 @@ def load_agent_state(agent: Agent, state: dict, env: CgailEnv | None = None) -> 
         agent.replay.load_state_dict(state["replay"])
     agent.iteration, agent.samples = int(state["iteration"]), int(state["samples"])
     agent.unstable_total = int(state.get("unstable_total", 0))
-    torch.set_rng_state(state["torch_rng"].cpu())
     agent.generator.set_state(state["gen_rng"].cpu())
     if agent.device_generator is not None and "device_gen_rng" in state:
         agent.device_generator.set_state(state["device_gen_rng"].cpu())
