@@ -95,7 +95,7 @@ class RunnerSettings:
 
 
 # ---------------------------------------------------------------------------- random states
-TORCH_RNG_KEY = "torch_rng"  # CPU generator state (ByteTensor), saved and restored for every learner here
+TORCH_RNG_KEY = "torch_rng"  # CPU generator state (ByteTensor), saved and restored here for every learner
 CUDA_RNG_KEY = "cuda_rng"  # list of ByteTensors, one per visible CUDA device
 
 
@@ -109,10 +109,10 @@ def cuda_rng_states() -> list[torch.Tensor] | None:
 
 
 def with_rng_states(state: dict) -> dict:
-    """`state` plus torch's global random states: `torch_rng` and `cuda_rng` when CUDA is in use.
-    Plain tensors and lists, so `weights_only=True` loading works."""
+    """`state` plus torch's global random states: `torch_rng` (unless the learner stored its own) and
+    `cuda_rng` when CUDA is in use. Plain tensors and lists, so `weights_only=True` loading works."""
     out = dict(state)
-    out[TORCH_RNG_KEY] = torch.get_rng_state()
+    out.setdefault(TORCH_RNG_KEY, torch.get_rng_state())
     cuda = cuda_rng_states()
     if cuda is not None:
         out[CUDA_RNG_KEY] = cuda
