@@ -305,6 +305,13 @@ def test_canonicalize(facing, angle):
     np.testing.assert_allclose(can.body_pos[..., 1], clip.body_pos[..., 1], atol=1e-9)
 
 
+def test_cross_matches_numpy_with_broadcasting():
+    rng = np.random.default_rng(0)
+    a, b = rng.standard_normal((5, 4, 3)), rng.standard_normal((4, 3))
+    np.testing.assert_allclose(R.cross(a, b), np.cross(a, b), atol=1e-14)
+    assert R.cross(np.array([1.0, 0, 0]), np.array([0, 1.0, 0])).tolist() == [0.0, 0.0, 1.0]
+
+
 def test_heading_of_known_rotations():
     th = np.array([0.0, 0.3, -1.2, 3.0])
     q = R.heading_quat(th)

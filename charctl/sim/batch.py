@@ -17,6 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from charctl.motion.rotations import cross
 from charctl.motion.skeleton import FEET, load_skeleton
 from charctl.sim import CONTROL_HZ, JOINT_ARMATURE, PHYSICS_HZ
 from charctl.sim.humanoid import layout, load_model
@@ -135,22 +136,38 @@ class BatchedHumanoid:
         return np.zeros(self.num_envs, dtype=bool) if prev is None else counts > prev
 
     # ------------------------------------------------------------------ derived quantities
+    # `rows` selects envs: all of them (the default, a view) or an index array (resets touch a few).
+    def body_pos_rows(self, rows: np.ndarray | slice = slice(None)) -> np.ndarray:
+        """(n, 15, 3) world positions of the body frames of envs `rows`, charctl body order."""
+        return self.xpos[rows][:, self.body_ids]
+
+    def body_quat_rows(self, rows: np.ndarray | slice = slice(None)) -> np.ndarray:
+        """(n, 15, 4) world orientations (xyzw) of the bodies of envs `rows`, charctl body order."""
+        q = self.xquat[rows][:, self.body_ids]
+        return np.concatenate([q[..., 1:4], q[..., :1]], axis=-1)
+
+    def body_velocities_rows(
+        self, rows: np.ndarray | slice = slice(None), body_pos: np.ndarray | None = None
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """World linear velocity of each body frame origin and world angular velocity, (n, 15, 3) each."""
+        cv = self.cvel[rows][:, self.body_ids]
+        ang, lin_c = cv[..., :3], cv[..., 3:]
+        pos = self.body_pos_rows(rows) if body_pos is None else body_pos
+        r = pos - self.subtree_com[rows][:, 1:2]
+        return lin_c + cross(ang, r), ang
+
     @property
     def body_pos(self) -> np.ndarray:
         """(N, 15, 3) world positions of the body frames, charctl body order."""
-        return self.xpos[:, self.body_ids]
+        return self.body_pos_rows()
 
     @property
     def body_quat_xyzw(self) -> np.ndarray:
-        q = self.xquat[:, self.body_ids]
-        return np.concatenate([q[..., 1:4], q[..., :1]], axis=-1)
+        return self.body_quat_rows()
 
     def body_velocities(self) -> tuple[np.ndarray, np.ndarray]:
         """World linear velocity of each body frame origin and world angular velocity, (N, 15, 3) each."""
-        cv = self.cvel[:, self.body_ids]
-        ang, lin_c = cv[..., :3], cv[..., 3:]
-        r = self.body_pos - self.subtree_com[:, 1:2]
-        return lin_c + np.cross(ang, r), ang
+        return self.body_velocities_rows()
 
     def com(self) -> np.ndarray:
         """(N, 3) whole-body centre of mass."""

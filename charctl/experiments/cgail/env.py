@@ -14,7 +14,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from charctl.experiments.cgail.features import DISC_OBS_DIM, STATE_DIM, disc_obs, policy_state, sim_kinematics
+from charctl.experiments.cgail.features import (
+    DISC_OBS_DIM,
+    STATE_DIM,
+    disc_obs,
+    heading_frame,
+    policy_state,
+    sim_kinematics,
+)
 from charctl.experiments.cgail.skills import SkillData
 from charctl.motion import rotations as R
 from charctl.sim.batch import BatchedHumanoid, SimSettings
@@ -178,27 +185,30 @@ class CgailEnv:
         qvel[:, :3] = R.rotate(turn, qvel[:, :3])  # world linear velocity turns; angular is body-local
         self.sim.set_state(ids, qpos, qvel)
         self._new_goal(ids)
-        k = sim_kinematics(self.sim)
-        self._state[ids] = self._policy_state(k)[ids]
-        self._obs[ids] = disc_obs(k)[ids]
+        k = sim_kinematics(self.sim, ids)  # only the reset rows
+        self._state[ids], self._obs[ids] = self._features(k, ids)
 
     # ------------------------------------------------------------------ observation
-    def _goal_features(self, k) -> np.ndarray:
+    def _goal_features(self, k, rows: np.ndarray | slice = slice(None)) -> np.ndarray:
+        """(n, 2) cos/sin of the goal direction relative to the heading of envs `rows` (0 without a goal)."""
         heading = R.yaw_about_y(k.body_rot[:, 0])
-        rel = self.goal_angle - heading
+        rel = self.goal_angle[rows] - heading
         g = np.stack([np.cos(rel), np.sin(rel)], axis=1)
-        return g * self.has_goal[self.cmd][:, None]
+        return g * self.has_goal[self.cmd[rows]][:, None]
 
-    def _phase_features(self) -> np.ndarray:
-        """(N, 2) cos/sin of the reference clip phase (tracking baseline)."""
-        phase = 2.0 * np.pi * self.ref_frame / np.maximum(self.clip_frames[self.cmd] - 1, 1)
+    def _phase_features(self, rows: np.ndarray | slice = slice(None)) -> np.ndarray:
+        """(n, 2) cos/sin of the reference clip phase of envs `rows` (tracking baseline)."""
+        frame, cmd = self.ref_frame[rows], self.cmd[rows]
+        phase = 2.0 * np.pi * frame / np.maximum(self.clip_frames[cmd] - 1, 1)
         return np.stack([np.cos(phase), np.sin(phase)], axis=1)
 
-    def _policy_state(self, k) -> np.ndarray:
-        parts = [policy_state(k), self._goal_features(k)]
+    def _features(self, k, rows: np.ndarray | slice = slice(None)) -> tuple[np.ndarray, np.ndarray]:
+        """(policy state, disc obs) of envs `rows` whose kinematics are `k`, sharing one heading frame."""
+        f = heading_frame(k)
+        parts = [policy_state(k, f), self._goal_features(k, rows)]
         if self.tracking:
-            parts.append(self._phase_features())
-        return np.concatenate(parts, axis=1)
+            parts.append(self._phase_features(rows))
+        return np.concatenate(parts, axis=1), disc_obs(k, f)
 
     def _advance_phase(self) -> tuple[np.ndarray, np.ndarray]:
         """Step every env's reference frame; returns (reference obs at the new frame, clip ended)."""
@@ -232,11 +242,11 @@ class CgailEnv:
         k = sim_kinematics(self.sim)
         clip_ended = np.zeros(self.N, dtype=bool)
         r_track = np.zeros(self.N)
-        pair_next = disc_obs(k)
-        if self.tracking:
+        if self.tracking:  # the phase in the state is the new one
             ref, clip_ended = self._advance_phase()
+        final_state, pair_next = self._features(k)
+        if self.tracking:
             r_track = tracking_reward(pair_next, ref)
-        final_state = self._policy_state(k)
         r_goal = self._goal_reward(k)
         fell = self.sim.non_foot_ground_contact(self.cfg.fall_tolerance)
         terminated = fell | unstable

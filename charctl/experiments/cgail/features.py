@@ -56,54 +56,73 @@ def _indices():
     return skel, ee
 
 
-def policy_state(k: Kinematics) -> np.ndarray:
-    """(N, 241) policy state in the heading frame."""
-    skel, ee = _indices()
+@dataclass
+class HeadingFrame:
+    """Quantities both feature vectors need, computed once per batch (heading frame, see module doc)."""
+
+    hinv: np.ndarray  # (N, 4) quaternion removing the root's yaw
+    h_b: np.ndarray  # (N, 15, 4) hinv broadcast over the bodies
+    root: np.ndarray  # (N, 3) world root position
+    rel: np.ndarray  # (N, 15, 3) body positions relative to the root, heading frame
+    lin: np.ndarray  # (N, 15, 3) body linear velocities, heading frame
+
+
+def heading_frame(k: Kinematics) -> HeadingFrame:
+    skel = load_skeleton()
     N = k.body_pos.shape[0]
     hinv = heading_inverse(k.body_rot[:, 0])
     h_b = np.broadcast_to(hinv[:, None], (N, skel.num_bodies, 4))
     root = k.body_pos[:, 0]
     rel = R.rotate(h_b, k.body_pos - root[:, None])
-    rot = _rot6(R.multiply(h_b, k.body_rot))
-    lin = R.rotate(h_b, k.lin_vel)
-    ang = R.rotate(h_b, k.ang_vel)
-    com = R.rotate(hinv, k.com - root)
-    com_v = R.rotate(hinv, k.com_vel)
+    return HeadingFrame(hinv, h_b, root, rel, R.rotate(h_b, k.lin_vel))
+
+
+def policy_state(k: Kinematics, f: HeadingFrame | None = None) -> np.ndarray:
+    """(N, 241) policy state in the heading frame (`f`: the batch's heading frame if already computed)."""
+    _, ee = _indices()
+    f = heading_frame(k) if f is None else f
+    N = k.body_pos.shape[0]
+    rot = _rot6(R.multiply(f.h_b, k.body_rot))
+    ang = R.rotate(f.h_b, k.ang_vel)
+    com = R.rotate(f.hinv, k.com - f.root)
+    com_v = R.rotate(f.hinv, k.com_vel)
     parts = [
-        root[:, 1:2],
-        rel[:, 1:].reshape(N, -1),
+        f.root[:, 1:2],
+        f.rel[:, 1:].reshape(N, -1),
         rot.reshape(N, -1),
-        lin.reshape(N, -1),
+        f.lin.reshape(N, -1),
         ang.reshape(N, -1),
         com,
         com_v,
-        rel[:, ee].reshape(N, -1),
+        f.rel[:, ee].reshape(N, -1),
     ]
     return np.concatenate(parts, axis=1)
 
 
-def disc_obs(k: Kinematics) -> np.ndarray:
+def disc_obs(k: Kinematics, f: HeadingFrame | None = None) -> np.ndarray:
     """(N, 133) discriminator observation o_t in the heading frame (no command in it)."""
     skel, ee = _indices()
+    f = heading_frame(k) if f is None else f
     N = k.body_pos.shape[0]
-    hinv = heading_inverse(k.body_rot[:, 0])
-    h_b = np.broadcast_to(hinv[:, None], (N, skel.num_bodies, 4))
-    root = k.body_pos[:, 0]
-    lin = R.rotate(h_b, k.lin_vel)
-    ang_root = R.rotate(hinv, k.ang_vel[:, 0])
+    ang_root = R.rotate(f.hinv, k.ang_vel[:, 0])
     joints = skel.clip_joint_bodies
     parents = skel.parents[joints]
     local = R.multiply(R.conjugate(k.body_rot[:, parents]), k.body_rot[:, joints])
-    rel = R.rotate(h_b, k.body_pos - root[:, None])
     parts = [
-        root[:, 1:2],
-        lin[:, 0],
+        f.root[:, 1:2],
+        f.lin[:, 0],
         ang_root,
         _rot6(local).reshape(N, -1),
-        lin[:, 1:].reshape(N, -1),
-        rel[:, ee].reshape(N, -1),
+        f.lin[:, 1:].reshape(N, -1),
+        f.rel[:, ee].reshape(N, -1),
     ]
     return np.concatenate(parts, axis=1)
+
+
+def state_and_obs(k: Kinematics) -> tuple[np.ndarray, np.ndarray]:
+    """(policy_state(k), disc_obs(k)) with their shared heading-frame terms computed once."""
+    f = heading_frame(k)
+    return policy_state(k, f), disc_obs(k, f)
 
 
 def clip_kinematics(clip) -> Kinematics:
@@ -121,14 +140,16 @@ def clip_kinematics(clip) -> Kinematics:
     )
 
 
-def sim_kinematics(sim) -> Kinematics:
-    """Kinematics of a BatchedHumanoid after a step (exact MuJoCo velocities)."""
-    lin, ang = sim.body_velocities()
-    com = sim.com()
+def sim_kinematics(sim, rows: np.ndarray | slice = slice(None)) -> Kinematics:
+    """Kinematics of envs `rows` (default all) of a BatchedHumanoid after a step (exact MuJoCo velocities)."""
+    pos = sim.body_pos_rows(rows)
+    rot = sim.body_quat_rows(rows)
+    lin, ang = sim.body_velocities_rows(rows, pos)
+    com = sim.subtree_com[rows][:, 1]
     mass = sim.model.body_subtreemass[1]
     # COM velocity = mass-weighted body COM velocities; body COM = frame origin + rotated local offset
     skel = load_skeleton()
-    body_com = sim.body_pos + R.rotate(sim.body_quat_xyzw, np.broadcast_to(skel.com_local, sim.body_pos.shape))
-    com_vel_bodies = lin + np.cross(ang, body_com - sim.body_pos)
+    offset = R.rotate(rot, np.broadcast_to(skel.com_local, pos.shape))
+    com_vel_bodies = lin + R.cross(ang, offset)
     com_vel = np.einsum("nbi,b->ni", com_vel_bodies, skel.masses) / mass
-    return Kinematics(sim.body_pos.copy(), sim.body_quat_xyzw, lin, ang, com.copy(), com_vel)
+    return Kinematics(pos, rot, lin, ang, com.copy(), com_vel)
