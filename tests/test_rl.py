@@ -1,10 +1,12 @@
 """PPO maths: GAE by hand, clipped surrogate, save/load round trip, same seed same weights."""
 
+import math
+
 import pytest
 import torch
 
 from charctl.nn.mlp import RunningNorm, mlp
-from charctl.rl.ppo import PPO, ActorCritic, PPOConfig, ppo_losses
+from charctl.rl.ppo import PPO, ActorCritic, PPOConfig, gaussian_entropy, gaussian_log_prob, ppo_losses
 from charctl.rl.storage import RolloutStorage, compute_gae
 
 
@@ -65,10 +67,24 @@ def test_same_seed_same_weights_and_state_round_trip(tmp_path):
     assert torch.allclose(a.mean_action(x, cond), c.mean_action(x, cond))
 
 
-def test_ppo_learns_a_contextual_bandit():
-    """PPO on a 1-step task: reward = -(a - target(c))^2; the mean action moves to the target."""
+def test_gaussian_log_prob_and_entropy_by_hand():
+    """One 2-D sample by hand: log N = -sum(z^2 / 2 + log s + log sqrt(2 pi)); torch.distributions agrees."""
+    a, mu, log_std = torch.tensor([[0.3, -1.0]]), torch.tensor([[0.1, -0.5]]), torch.log(torch.tensor([0.1, 0.5]))
+    z2 = (0.2 / 0.1) ** 2 + (0.5 / 0.5) ** 2  # 4 + 1
+    hand = -(z2 / 2 + math.log(0.1) + math.log(0.5) + 2 * 0.5 * math.log(2 * math.pi))
+    assert gaussian_log_prob(a, mu, log_std).item() == pytest.approx(hand, rel=1e-6)
+    ref = torch.distributions.Normal(mu, log_std.exp())
+    assert gaussian_log_prob(a, mu, log_std).item() == pytest.approx(ref.log_prob(a).sum().item(), rel=1e-6)
+    assert gaussian_entropy(log_std).item() == pytest.approx(ref.entropy().sum().item(), rel=1e-6)
+
+
+@pytest.mark.parametrize("precision", ["fp32", "bf16"])
+def test_ppo_learns_a_contextual_bandit(precision):
+    """PPO on a 1-step task: reward = -(a - target(c))^2; the mean action moves to the target,
+    with the update in fp32 and with its hidden layers in bf16."""
     torch.manual_seed(0)
     cfg = PPOConfig(hidden=[32, 32], action_std=0.3, lr=3e-3, epochs=4, minibatch_size=64, gamma=0.0, lam=0.0)
+    cfg.update_precision = precision
     model = ActorCritic(1, 1, cfg, cond_dim=2)
     ppo = PPO(model, cfg)
     targets = torch.tensor([-1.0, 1.0])
@@ -126,3 +142,26 @@ def test_ratio_clamp_share_stops_a_jumping_policy():
     check_policy_step({"losses/ratio_clamped": share})
     with pytest.raises(Diverged, match="20 nats on 2.0 %"):
         check_policy_step({"losses/ratio_clamped": 0.02}, where="iteration 3")
+
+
+def test_bf16_update_starts_at_ratio_one_and_bad_precision_is_refused():
+    """bf16 recomputes the behaviour log-probs in its own precision: one epoch of lr 0 gives approx_kl = 0
+    and no clipping; an unknown precision is a one-line config error."""
+    from charctl.rl.config import check_ppo
+
+    torch.manual_seed(1)
+    cfg = PPOConfig(hidden=[64, 64], action_std=0.1, lr=0.0, epochs=1, minibatch_size=128)
+    cfg.update_precision = "bf16"
+    model = ActorCritic(5, 3, cfg)
+    st = RolloutStorage(2, 128, 5, 3, 0)
+    for _ in range(2):
+        obs = 3 * torch.randn(128, 5)
+        a, logp, v = model.act(obs)
+        st.add(obs, None, a, logp, v, torch.randn(128), torch.zeros(128))
+    st.finish(torch.zeros(128), 0.99, 0.95)
+    stats = PPO(model, cfg).update(st)
+    assert stats["losses/approx_kl"] == pytest.approx(0.0, abs=1e-7)
+    assert stats["losses/clip_frac"] == 0.0
+    assert check_ppo(cfg) is None
+    cfg.update_precision = "fp16"
+    assert "ppo.update_precision must be one of fp32, bf16" in check_ppo(cfg)

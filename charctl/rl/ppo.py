@@ -45,9 +45,6 @@ class ActorCritic(nn.Module):
     def value(self, obs: torch.Tensor, cond: torch.Tensor | None = None) -> torch.Tensor:
         return self.critic(self._input(obs, cond)).squeeze(-1)
 
-    def distribution(self, obs: torch.Tensor, cond: torch.Tensor | None = None) -> torch.distributions.Normal:
-        return torch.distributions.Normal(self.mean_action(obs, cond), self.log_std.exp().expand(self.act_dim))
-
     @torch.no_grad()
     def act(self, obs: torch.Tensor, cond: torch.Tensor | None = None, deterministic: bool = False):
         """One batched forward: (actions, log_probs, values)."""
@@ -56,8 +53,33 @@ class ActorCritic(nn.Module):
         value = self.critic(x).squeeze(-1)
         std = self.log_std.exp().expand_as(mean)
         action = mean if deterministic else mean + std * torch.randn_like(mean)
-        logp = torch.distributions.Normal(mean, std).log_prob(action).sum(-1)
-        return action, logp, value
+        return action, gaussian_log_prob(action, mean, self.log_std), value
+
+    def heads(self, x: torch.Tensor, low_precision: torch.dtype | None = None) -> tuple[torch.Tensor, torch.Tensor]:
+        """(action mean, value) of network inputs `x`; with `low_precision` the hidden layers run under
+        autocast in that dtype and the two output layers in fp32."""
+        if low_precision is None:
+            return self.actor(x), self.critic(x).squeeze(-1)
+        with torch.autocast(x.device.type, dtype=low_precision):
+            h_actor, h_critic = self.actor[:-1](x), self.critic[:-1](x)
+        return self.actor[-1](h_actor.float()), self.critic[-1](h_critic.float()).squeeze(-1)
+
+
+_LOG_SQRT_2PI = 0.5 * math.log(2.0 * math.pi)
+
+
+def gaussian_log_prob(actions: torch.Tensor, mean: torch.Tensor, log_std: torch.Tensor) -> torch.Tensor:
+    """log N(actions; mean, diag(exp(log_std)^2)) summed over the last axis (nats).
+
+    Written out (the same value as torch.distributions.Normal(...).log_prob(...).sum(-1)) so the hot
+    paths skip the distribution object's argument validation."""
+    z = (actions - mean) * torch.exp(-log_std)
+    return -(0.5 * z.square() + log_std + _LOG_SQRT_2PI).sum(-1)
+
+
+def gaussian_entropy(log_std: torch.Tensor) -> torch.Tensor:
+    """Entropy (nats) of a diagonal Gaussian with these log standard deviations: sum(0.5 + log sqrt(2 pi) + log std)."""
+    return (0.5 + _LOG_SQRT_2PI + log_std).sum(-1)
 
 
 LOG_RATIO_LIMIT = 20.0  # |log pi_new - log pi_old| above this is clamped (exp(20) = 4.9e8, finite in float32)
@@ -125,6 +147,11 @@ class PPO:
         steps = 0
         # The observation normaliser is frozen during the update: normalise the whole batch once.
         inputs = self.model.network_input(data["obs"], data["cond"] if self.model.cond_dim else None)
+        low = {"fp32": None, "bf16": torch.bfloat16}[cfg.update_precision]
+        old_logp = data["log_probs"]
+        if low is not None:  # the behaviour log-probs in the update's own precision: the ratio starts at 1
+            with torch.no_grad():
+                old_logp = gaussian_log_prob(data["actions"], self.model.heads(inputs, low)[0], self.model.log_std)
         for _ in range(cfg.epochs):
             perm = torch.randperm(n, generator=self.generator).to(data["obs"].device)
             for start in range(0, n - mb + 1, mb):
@@ -133,13 +160,11 @@ class PPO:
                 adv = data["advantages"][idx]
                 if cfg.normalize_advantages and adv.numel() > 1:
                     adv = (adv - adv.mean()) / (adv.std() + 1e-8)
-                std = self.model.log_std.exp()
-                dist = torch.distributions.Normal(self.model.actor(x), std.expand(self.model.act_dim))
-                new_logp = dist.log_prob(data["actions"][idx]).sum(-1)
-                values = self.model.critic(x).squeeze(-1)
+                mean, values = self.model.heads(x, low)
+                new_logp = gaussian_log_prob(data["actions"][idx], mean, self.model.log_std)
                 losses = ppo_losses(
                     new_logp,
-                    data["log_probs"][idx],
+                    old_logp[idx],
                     adv,
                     values,
                     data["values"][idx],
@@ -147,7 +172,7 @@ class PPO:
                     cfg.clip,
                     cfg.value_clip,
                 )
-                entropy = dist.entropy().sum(-1).mean()
+                entropy = gaussian_entropy(self.model.log_std)
                 loss = losses["policy"] + cfg.value_coef * losses["value"] - cfg.entropy_coef * entropy
                 self.optimizer.zero_grad(set_to_none=True)
                 loss.backward()

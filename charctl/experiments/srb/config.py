@@ -10,7 +10,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from charctl.config import BaseConfig
-from charctl.rl.config import PPOConfig
+from charctl.rl.config import PPOConfig, check_ppo
 
 
 @dataclass
@@ -170,6 +170,8 @@ class Config(BaseConfig):
         """Cross-field checks (called by charctl.config.validate); a message or None."""
         from charctl.experiments.srb.qp import SOLVERS
 
+        if (msg := check_ppo(cfg.ppo)) is not None:
+            return msg
         if cfg.tracking.solver not in SOLVERS:
             return f"tracking.solver={cfg.tracking.solver!r}; choose one of {', '.join(SOLVERS)}"
         if cfg.action.foot_mode not in ("reference", "paper"):
