@@ -161,3 +161,51 @@ def test_wrong_checkpoint_is_one_line_error(smoke_run_copy):
     run_dir = smoke_run_copy("cgail")
     with pytest.raises(CharctlError, match="hidden"):
         train_command("cgail", ["ppo.hidden=[16]", "train.total_samples=2048"], resume=run_dir)
+
+
+def test_reset_rows_get_the_same_features_as_the_whole_batch():
+    """Resets compute kinematics and features for the reset rows only: they must equal the rows of the
+    whole-batch computation (state with goal and phase, disc obs), and the fused state+obs must equal
+    the two separate functions."""
+    from omegaconf import OmegaConf
+
+    from charctl.experiments.cgail.config import EnvConfig, SkillConfig
+    from charctl.experiments.cgail.env import CgailEnv
+    from charctl.experiments.cgail.features import disc_obs, policy_state, sim_kinematics, state_and_obs
+    from charctl.experiments.cgail.skills import load_skills
+
+    cfg = OmegaConf.structured(EnvConfig(num_envs=6, switch_prob=0.0))
+    skills = load_skills([SkillConfig("walk", "walk"), SkillConfig("kick", "kick")], 30.0)
+    env = CgailEnv(skills, cfg, seed=3, tracking=True)
+    rng = np.random.default_rng(0)
+    for _ in range(3):
+        env.step(0.1 * rng.standard_normal((6, env.sim.layout.nu)))
+    ids = np.array([1, 4])
+    env.reset(ids)
+    whole = sim_kinematics(env.sim)
+    state, obs = env._features(whole)
+    np.testing.assert_allclose(env.state[ids], state[ids], atol=1e-12)
+    np.testing.assert_allclose(env.obs[ids], obs[ids], atol=1e-12)
+    s, o = state_and_obs(whole)
+    np.testing.assert_array_equal(s, policy_state(whole))
+    np.testing.assert_array_equal(o, disc_obs(whole))
+
+
+def test_episode_length_curriculum_by_hand():
+    """0.5 s growing to 5 s over 1e6 samples at 30 Hz: 15 control steps at the start, 1.625 s = 48.75 -> 49
+    at 2.5e5, 150 from 1e6 on; off (start 0) = 150 throughout. A start beyond episode_seconds is refused."""
+    from omegaconf import OmegaConf
+
+    from charctl.config import compose_config
+    from charctl.errors import CharctlError
+    from charctl.experiments.cgail.config import Config, EnvConfig
+    from charctl.experiments.cgail.train import episode_limit_steps
+
+    cur = OmegaConf.structured(
+        EnvConfig(episode_seconds=5.0, control_hz=30.0, curriculum_start_seconds=0.5, curriculum_samples=1_000_000)
+    )
+    assert [episode_limit_steps(cur, n) for n in (0, 250_000, 1_000_000, 3_000_000)] == [15, 49, 150, 150]
+    off = OmegaConf.structured(EnvConfig(episode_seconds=5.0, control_hz=30.0))
+    assert [episode_limit_steps(off, n) for n in (0, 10**7)] == [150, 150]
+    with pytest.raises(CharctlError, match="curriculum_start_seconds"):
+        compose_config("cgail", ["scale=smoke", "env.curriculum_start_seconds=99"], Config)

@@ -7,7 +7,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from charctl.config import BaseConfig
-from charctl.rl.config import PPOConfig
+from charctl.rl.config import PPOConfig, check_ppo
 from charctl.sim import CONTROL_HZ, JOINT_ARMATURE, PHYSICS_HZ
 
 
@@ -55,6 +55,11 @@ class EnvConfig:
     armature: float = JOINT_ARMATURE  # kg m^2 rotor inertia per hinge; >= 0.05 keeps physics_hz 150 stable
     control_hz: float = CONTROL_HZ  # policy rate, charctl.sim.CONTROL_HZ (DeepMimic and the paper: 30 Hz)
     episode_seconds: float = 10.0  # truncation length of an episode
+    # Episode-length curriculum (DeepMimic's 0.5 s -> 20 s): training episodes are truncated at
+    # curriculum_start_seconds at first, the limit growing linearly to episode_seconds over
+    # curriculum_samples samples. 0 = off (every episode may last episode_seconds). docs/cgail.md, "Ablation".
+    curriculum_start_seconds: float = 0.0
+    curriculum_samples: int = 2_000_000
     ramp_frames: int = 60  # eq 4.10-4.11: linear command ramp length (control frames); 0 = switch in one frame
     switch_prob: float = 0.01  # per control step, probability of re-sampling the command within an episode
     action_scale: float = 1.0  # PD target (rad) = rest pose + action_scale * action
@@ -129,6 +134,8 @@ class Config(BaseConfig):
             return f"use_skills names unknown skill(s) {unknown}; skills are {names}"
         if len(set(names)) != len(names):
             return f"skill names must be unique, got {names}"
+        if (msg := check_ppo(cfg.ppo)) is not None:
+            return msg
         if cfg.reward.kind not in ("adversarial", "tracking"):
             return f"reward.kind must be 'adversarial' or 'tracking', got {cfg.reward.kind!r}"
         if cfg.reward.class_form not in ("l1", "prob", "logratio"):
@@ -140,6 +147,13 @@ class Config(BaseConfig):
         ratio = cfg.env.physics_hz / cfg.env.control_hz
         if abs(ratio - round(ratio)) > 1e-6:
             return f"env.physics_hz ({cfg.env.physics_hz}) must be a multiple of env.control_hz ({cfg.env.control_hz})"
+        if not 0.0 <= cfg.env.curriculum_start_seconds <= cfg.env.episode_seconds:
+            return (
+                f"env.curriculum_start_seconds ({cfg.env.curriculum_start_seconds}) must lie in "
+                f"[0, env.episode_seconds ({cfg.env.episode_seconds})]"
+            )
+        if cfg.env.curriculum_samples < 1:
+            return "env.curriculum_samples must be >= 1"
         if cfg.env.ramp_frames < 0:
             return "env.ramp_frames must be >= 0"
         if cfg.env.backend not in ("cpu", "warp", "auto"):

@@ -405,6 +405,16 @@ def _synchronize(device: str) -> None:
         torch.cuda.synchronize(device)
 
 
+def episode_limit_steps(env_cfg, samples: int) -> int:
+    """Truncation length (control steps) of training episodes after `samples` samples: the
+    curriculum's start length growing linearly to `episode_seconds` over `curriculum_samples`
+    (env.curriculum_*), or `episode_seconds` throughout when the curriculum is off."""
+    full = env_cfg.episode_seconds
+    start = env_cfg.curriculum_start_seconds or full
+    seconds = start + (full - start) * min(1.0, samples / env_cfg.curriculum_samples)
+    return max(1, int(round(seconds * env_cfg.control_hz)))
+
+
 class CgailLearner(AgentCounters):
     """One cgail iteration for the shared runner (charctl.rl.runner): rollout, rewards, PPO,
     discriminator. Counters live on the agent so checkpoints keep their layout."""
@@ -456,6 +466,7 @@ class CgailLearner(AgentCounters):
 
     def iterate(self) -> dict[str, float]:
         agent, env, cfg = self.agent, self.env, self.cfg
+        env.max_steps = episode_limit_steps(cfg.env, agent.samples)
         t0 = time.perf_counter()
         ro = collect_rollout(agent, env, cfg.train.rollout_steps)
         t1 = time.perf_counter()
@@ -487,6 +498,7 @@ class CgailLearner(AgentCounters):
             "train/r_track": float(ro.r_track.mean()),
             "train/reward": float(reward.mean()),
             "train/episode_length": mean_len,
+            "train/episode_limit": float(env.max_steps),
             "train/unstable_resets_total": float(agent.unstable_total),
             "train/falls": float(ro.falls),
             "train/unstable_rate": float(ro.unstable) / n,
