@@ -141,6 +141,18 @@ def expand_multirun(overrides: list[str]) -> list[list[str]]:
     return [list(c) for c in itertools.product(*axes)] if axes else [[]]
 
 
+def plain_section(section: Any) -> Any:
+    """A structured OmegaConf section as its plain dataclass (same values), anything else unchanged.
+
+    Hot loops read their section's fields thousands of times per second; through OmegaConf each read
+    costs ~40 us, on a dataclass ~50 ns."""
+    from omegaconf import OmegaConf
+
+    if OmegaConf.is_config(section) and dataclasses.is_dataclass(OmegaConf.get_type(section)):
+        return OmegaConf.to_object(section)
+    return section
+
+
 def to_yaml(cfg) -> str:
     from omegaconf import OmegaConf
 

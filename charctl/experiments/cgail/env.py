@@ -14,6 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from charctl.config import plain_section
 from charctl.experiments.cgail.features import (
     DISC_OBS_DIM,
     STATE_DIM,
@@ -84,7 +85,7 @@ class CgailEnv:
     ):
         self.skills = skills
         self.tracking = tracking  # phase in the state, reference frame advanced every step
-        self.cfg = env_cfg
+        self.cfg = env_cfg = plain_section(env_cfg)  # typed fields, cheap reads in the step loop
         self.K = len(skills)
         self.conditional = conditional
         self.rng = np.random.default_rng(seed)

@@ -22,6 +22,7 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
+from charctl.config import plain_section
 from charctl.experiments.cgail.env import GOAL_DIM, PHASE_DIM
 from charctl.experiments.cgail.features_torch import (
     DISC_OBS_DIM,
@@ -80,7 +81,7 @@ class CgailDeviceEnv:
         from charctl.sim.warp_batch import WarpBatchedHumanoid
 
         self.skills = skills
-        self.cfg = env_cfg
+        self.cfg = env_cfg = plain_section(env_cfg)  # typed fields, cheap reads in the step loop
         self.tracking = tracking
         self.conditional = conditional
         self.K = len(skills)
