@@ -1,12 +1,16 @@
 """Copy a finished cgail run into pretrained/<name>/ as a small, loadable run directory.
 
-    .venv/bin/python scripts/package_pretrained.py RUN_DIR pretrained/<name>
+    .venv/bin/python scripts/package_pretrained.py RUN_DIR pretrained/<name> [--max-points 500]
 
-Keeps config.yaml, metrics.json, the TensorBoard events and checkpoints/last.pt without the
+Keeps config.yaml, metrics.json, the TensorBoard scalars and checkpoints/last.pt without the
 discriminator's replay buffer (tens of MB of policy samples that only a resumed training run
 would use; a resume from the packaged checkpoint starts with an empty buffer). Everything else
 in the checkpoint (networks, optimisers, normalisers, counters, RNG states) is kept, so
 `charctl eval` and `charctl export` take the packaged directory like any run directory.
+
+The scalars are rewritten into one event file, each tag thinned to at most `--max-points` evenly
+spaced points (first and last kept, step and wall time unchanged; 0 = copy the event files as they
+are): a long run logs every iteration and its events would be most of the folder.
 """
 
 from __future__ import annotations
@@ -15,11 +19,37 @@ import argparse
 import shutil
 from pathlib import Path
 
+import numpy as np
+
+
+def thinned_indices(n: int, max_points: int) -> np.ndarray:
+    """Indices of at most `max_points` evenly spaced points of n, the first and the last included."""
+    if n <= max_points:
+        return np.arange(n)
+    return np.unique(np.linspace(0, n - 1, max_points).round().astype(int))
+
+
+def write_thinned_scalars(src: Path, dest: Path, max_points: int) -> None:
+    """Every scalar tag of the event files under `src`, thinned, into one event file under `dest`."""
+    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+    from torch.utils.tensorboard import SummaryWriter
+
+    acc = EventAccumulator(str(src), size_guidance={"scalars": 0})
+    acc.Reload()
+    writer = SummaryWriter(str(dest))
+    for tag in acc.Tags().get("scalars", []):
+        events = acc.Scalars(tag)
+        for i in thinned_indices(len(events), max_points):
+            e = events[i]
+            writer.add_scalar(tag, e.value, e.step, walltime=e.wall_time)
+    writer.close()
+
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("run_dir", type=Path)
     ap.add_argument("dest", type=Path)
+    ap.add_argument("--max-points", type=int, default=500, help="points kept per scalar tag (0 = all, files copied)")
     a = ap.parse_args()
     import torch
 
@@ -34,7 +64,10 @@ def main() -> None:
             shutil.copy2(a.run_dir / name, a.dest / name)
     if (a.dest / "tb").exists():
         shutil.rmtree(a.dest / "tb")
-    shutil.copytree(a.run_dir / "tb", a.dest / "tb")
+    if a.max_points > 0:
+        write_thinned_scalars(a.run_dir / "tb", a.dest / "tb", a.max_points)
+    else:
+        shutil.copytree(a.run_dir / "tb", a.dest / "tb")
     (a.dest / "checkpoints").mkdir(exist_ok=True)
     torch.save(payload, a.dest / "checkpoints" / "last.pt")
     size = sum(p.stat().st_size for p in a.dest.rglob("*") if p.is_file())

@@ -1,0 +1,44 @@
+"""scripts/package_pretrained.py: a run folder becomes a small one that `charctl eval` still takes."""
+
+from __future__ import annotations
+
+import importlib.util
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from charctl.eval.tb import read_scalars
+
+SCRIPT = Path(__file__).resolve().parents[1] / "scripts" / "package_pretrained.py"
+
+
+def _load_script():
+    spec = importlib.util.spec_from_file_location("package_pretrained", SCRIPT)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def test_thinned_indices_keep_first_and_last():
+    mod = _load_script()
+    assert mod.thinned_indices(5, 10).tolist() == [0, 1, 2, 3, 4]
+    assert mod.thinned_indices(101, 5).tolist() == [0, 25, 50, 75, 100]
+    assert mod.thinned_indices(10, 2).tolist() == [0, 9]
+
+
+def test_packaged_smoke_run_has_thinned_scalars_and_no_replay(smoke_run, tmp_path, monkeypatch):
+    mod = _load_script()
+    src = smoke_run("cgail")
+    dest = tmp_path / "packaged"
+    monkeypatch.setattr("sys.argv", ["package_pretrained.py", str(src), str(dest), "--max-points", "2"])
+    mod.main()
+    before, after = read_scalars(src / "tb"), read_scalars(dest / "tb")
+    assert set(after) == set(before)
+    for tag, (steps, values) in before.items():
+        s2, v2 = after[tag]
+        assert len(s2) == min(2, len(steps))
+        assert s2[0] == steps[0] and s2[-1] == steps[-1]
+        np.testing.assert_allclose(v2[-1], values[-1], rtol=1e-6)
+    payload = torch.load(dest / "checkpoints" / "last.pt", map_location="cpu", weights_only=True)
+    assert "replay" not in payload["state"] and "ppo" in payload["state"]
