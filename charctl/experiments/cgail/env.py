@@ -149,7 +149,7 @@ class CgailEnv:
     def _new_goal(self, ids: np.ndarray) -> None:
         if len(ids) == 0:
             return
-        heading = R.yaw_about_y(self.sim.body_quat_xyzw[ids, 0])
+        heading = R.yaw_about_y(self.sim.body_quat_rows(ids)[:, 0])
         spread = np.radians(self.cfg.goal_max_angle_deg)
         self.goal_angle[ids] = heading + self.rng.uniform(-spread, spread, size=len(ids))
 
