@@ -164,4 +164,15 @@ def test_bf16_update_starts_at_ratio_one_and_bad_precision_is_refused():
     assert stats["losses/clip_frac"] == 0.0
     assert check_ppo(cfg) is None
     cfg.update_precision = "fp16"
-    assert "ppo.update_precision must be one of fp32, bf16" in check_ppo(cfg)
+    assert "ppo.update_precision must be one of fp32, bf16, auto" in check_ppo(cfg)
+
+
+def test_auto_precision_follows_the_hardware(monkeypatch):
+    """auto = bf16 only where bf16 is native (CPU flags amx_bf16/avx512_bf16); explicit choices stay."""
+    from charctl.rl import ppo as P
+
+    cpu = torch.device("cpu")
+    monkeypatch.setattr(P, "cpu_has_native_bf16", lambda: True)
+    assert [P.resolve_update_precision(c, cpu) for c in ("auto", "fp32", "bf16")] == ["bf16", "fp32", "bf16"]
+    monkeypatch.setattr(P, "cpu_has_native_bf16", lambda: False)
+    assert [P.resolve_update_precision(c, cpu) for c in ("auto", "fp32", "bf16")] == ["fp32", "fp32", "bf16"]

@@ -24,14 +24,15 @@ class PPOConfig:
     activation: str = "relu"  # relu | tanh | elu | silu
     action_std: float = 0.1  # initial std of the Gaussian policy (in action units)
     learn_std: bool = False  # keep the std fixed (paper) or learn it
-    # Precision of the update's hidden layers: fp32, or bf16 (autocast; output layers, losses and the
-    # Adam state stay fp32, and the old log-probs are recomputed in the same precision so the ratio starts
-    # at exactly 1). bf16 pays off on CPUs with AMX/AVX512-BF16 (2.2x per minibatch step measured on a
-    # Sapphire Rapids core pair) and on GPUs; elsewhere it can be slower. docs/cgail.md, "Throughput".
+    # Precision of the update's hidden layers: fp32, bf16 (autocast; output layers, losses and the Adam
+    # state stay fp32, and the old log-probs are recomputed in the same precision so the ratio starts at
+    # exactly 1) or auto (bf16 where the hardware multiplies bf16 natively: a CPU with AMX-BF16 or
+    # AVX512-BF16, a CUDA GPU with bf16; else fp32). bf16 made a PPO minibatch step 2.2x faster on this
+    # project's Sapphire Rapids core pair; without native support it is slower. docs/cgail.md, "Throughput".
     update_precision: str = "fp32"
 
 
-UPDATE_PRECISIONS = ("fp32", "bf16")
+UPDATE_PRECISIONS = ("fp32", "bf16", "auto")
 
 
 def check_ppo(ppo) -> str | None:

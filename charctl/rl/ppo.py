@@ -130,6 +130,26 @@ def make_adam(params, lr: float) -> torch.optim.Adam:
     return torch.optim.Adam(params, lr=lr, fused=True)
 
 
+def cpu_has_native_bf16() -> bool:
+    """True where the CPU flags (Linux /proc/cpuinfo) list AMX-BF16 or AVX512-BF16; False elsewhere."""
+    try:
+        text = open("/proc/cpuinfo", encoding="ascii", errors="ignore").read()
+    except OSError:
+        return False
+    flags = set(text.split())
+    return bool(flags & {"amx_bf16", "avx512_bf16"})
+
+
+def resolve_update_precision(choice: str, device: torch.device) -> str:
+    """The precision (fp32 | bf16) the update runs in for the config's `choice` on `device`
+    (auto: bf16 where the hardware multiplies bf16 natively, else fp32)."""
+    if choice != "auto":
+        return choice
+    if device.type == "cuda":
+        return "bf16" if torch.cuda.is_bf16_supported() else "fp32"
+    return "bf16" if device.type == "cpu" and cpu_has_native_bf16() else "fp32"
+
+
 class PPO:
     """Owns the actor-critic and its optimiser; `update(storage)` runs the minibatch epochs."""
 
@@ -137,6 +157,7 @@ class PPO:
         self.model, self.cfg = model, cfg
         self.optimizer = make_adam([p for p in model.parameters() if p.requires_grad], lr=cfg.lr)
         self.generator = generator
+        self.precision = resolve_update_precision(cfg.update_precision, next(model.parameters()).device)
 
     def update(self, storage: RolloutStorage) -> dict[str, float]:
         cfg = self.cfg
@@ -147,7 +168,7 @@ class PPO:
         steps = 0
         # The observation normaliser is frozen during the update: normalise the whole batch once.
         inputs = self.model.network_input(data["obs"], data["cond"] if self.model.cond_dim else None)
-        low = {"fp32": None, "bf16": torch.bfloat16}[cfg.update_precision]
+        low = {"fp32": None, "bf16": torch.bfloat16}[self.precision]
         old_logp = data["log_probs"]
         if low is not None:  # the behaviour log-probs in the update's own precision: the ratio starts at 1
             with torch.no_grad():

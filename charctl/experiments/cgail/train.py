@@ -528,7 +528,12 @@ class CgailLearner(AgentCounters):
             for k, v in stats.items()
             if k.startswith(prefixes) and k != "perf/samples_per_s"
         }
-        return {"skills": [s.name for s in self.agent.skills], "conditional": self.agent.conditional, **short}
+        return {
+            "skills": [s.name for s in self.agent.skills],
+            "conditional": self.agent.conditional,
+            "ppo_update_precision": self.agent.ppo.precision,  # ppo.update_precision=auto resolved here
+            **short,
+        }
 
 
 # ---------------------------------------------------------------------------- main loop
