@@ -4,18 +4,21 @@ CGAIL_PAPER := outputs/repro/cgail-paper
 # The shipped amp-walk, tracking-walk and cgail-3skill were trained before the small preset moved to
 # 150 Hz physics with 0.05 joint armature (docs/cgail.md, "Throughput"): reproduce them at their rate.
 CGAIL_300HZ := env.physics_hz=300 env.armature=0.01
+# All four shipped policies were trained before the small preset's PPO update moved to bf16 where the
+# hardware has it (ppo.update_precision=auto): reproduce them with their fp32 update.
+CGAIL_FP32 := ppo.update_precision=fp32
 
 .PHONY: repro-cgail-small repro-cgail-10skill repro-cgail-paper demo-cgail
 
 repro-cgail-10skill: install ## cgail: the shipped ten-skill run (pretrained/README.md; ~1.5 h on 2 cores, stop with Ctrl-C), evaluated
-	$(CHARCTL) train cgail scale=small "use_skills=[]" reward.class_form=logratio train.total_samples=27000000 train.checkpoint_every=20 seed=1 output_root=$(CGAIL_SMALL)/ten
+	$(CHARCTL) train cgail scale=small "use_skills=[]" reward.class_form=logratio train.total_samples=27000000 train.checkpoint_every=20 $(CGAIL_FP32) seed=1 output_root=$(CGAIL_SMALL)/ten
 	C=$$(ls -d $(CGAIL_SMALL)/ten/cgail/*/ | tail -1); \
 	$(CHARCTL) eval $$C --survival 5 -k 64 -o $(CGAIL_SMALL)/ten-eval && $(CHARCTL) eval $$C --confusion -k 16 -o $(CGAIL_SMALL)/ten-eval
 
 repro-cgail-small: install ## cgail: the shipped policies' runs (pretrained/README.md: cGAIL 3 skills, AMP and tracking walk; ~3 h on 2 cores), evaluated
-	$(CHARCTL) train cgail scale=small train.total_samples=8000000 $(CGAIL_300HZ) seed=1 output_root=$(CGAIL_SMALL)/cgail
-	$(CHARCTL) train cgail scale=small use_skills=[walk] cgail.conditional=false train.total_samples=2000000 $(CGAIL_300HZ) seed=1 output_root=$(CGAIL_SMALL)/amp
-	$(CHARCTL) train cgail scale=small use_skills=[walk] cgail.conditional=false reward.kind=tracking train.total_samples=1500000 $(CGAIL_300HZ) seed=1 output_root=$(CGAIL_SMALL)/tracking
+	$(CHARCTL) train cgail scale=small train.total_samples=8000000 $(CGAIL_300HZ) $(CGAIL_FP32) seed=1 output_root=$(CGAIL_SMALL)/cgail
+	$(CHARCTL) train cgail scale=small use_skills=[walk] cgail.conditional=false train.total_samples=2000000 $(CGAIL_300HZ) $(CGAIL_FP32) seed=1 output_root=$(CGAIL_SMALL)/amp
+	$(CHARCTL) train cgail scale=small use_skills=[walk] cgail.conditional=false reward.kind=tracking train.total_samples=1500000 $(CGAIL_300HZ) $(CGAIL_FP32) seed=1 output_root=$(CGAIL_SMALL)/tracking
 	C=$$(ls -d $(CGAIL_SMALL)/cgail/cgail/*/ | tail -1); A=$$(ls -d $(CGAIL_SMALL)/amp/cgail/*/ | tail -1); \
 	T=$$(ls -d $(CGAIL_SMALL)/tracking/cgail/*/ | tail -1); \
 	rm -f $(CGAIL_SMALL)/report.md; \

@@ -260,7 +260,9 @@ class CgailEnv:
         self._advance_ramp()
         if done.size:
             self.reset(done)
-        self._maybe_switch(np.setdiff1d(np.arange(self.N), done))
+        running = np.ones(self.N, dtype=bool)
+        running[done] = False
+        self._maybe_switch(np.flatnonzero(running))
         return StepResult(
             self._state, self._obs, pair_next, final_state, r_goal, r_track, terminated, truncated, unstable
         )

@@ -37,17 +37,12 @@ class Kinematics:
     ang_vel: np.ndarray  # (N, 15, 3)
     com: np.ndarray  # (N, 3)
     com_vel: np.ndarray  # (N, 3)
+    body_mat: np.ndarray | None = None  # (N, 15, 3, 3) rotation matrices of body_rot, when already computed
 
 
 def heading_inverse(root_rot: np.ndarray) -> np.ndarray:
     """(N, 4) quaternion removing the root's heading (rotation by -yaw about +y)."""
     return R.heading_quat(-R.yaw_about_y(root_rot))
-
-
-def _rot6(q: np.ndarray) -> np.ndarray:
-    """(..., 4) -> (..., 6): first two columns of the rotation matrix."""
-    m = R.to_matrix(q)
-    return np.concatenate([m[..., :, 0], m[..., :, 1]], axis=-1)
 
 
 def _indices():
@@ -58,23 +53,35 @@ def _indices():
 
 @dataclass
 class HeadingFrame:
-    """Quantities both feature vectors need, computed once per batch (heading frame, see module doc)."""
+    """Quantities both feature vectors need, computed once per batch (heading frame, see module doc).
 
-    hinv: np.ndarray  # (N, 4) quaternion removing the root's yaw
-    h_b: np.ndarray  # (N, 15, 4) hinv broadcast over the bodies
+    Rotations are applied as 3x3 matrices (batched matmul): one quaternion-to-matrix conversion of
+    every body serves the body rotations of the state and the local joint rotations of o."""
+
+    h_t: np.ndarray  # (N, 3, 3) transpose of the matrix removing the root's yaw: v_heading = v @ h_t
+    body_mat: np.ndarray  # (N, 15, 3, 3) world rotation matrices of the bodies
     root: np.ndarray  # (N, 3) world root position
     rel: np.ndarray  # (N, 15, 3) body positions relative to the root, heading frame
     lin: np.ndarray  # (N, 15, 3) body linear velocities, heading frame
 
+    def rotate(self, v: np.ndarray) -> np.ndarray:
+        """(N, 3) or (N, B, 3) world vectors in the heading frame."""
+        if v.ndim == 2:
+            return np.matmul(v[:, None, :], self.h_t)[:, 0]
+        return np.matmul(v, self.h_t)
+
 
 def heading_frame(k: Kinematics) -> HeadingFrame:
-    skel = load_skeleton()
-    N = k.body_pos.shape[0]
-    hinv = heading_inverse(k.body_rot[:, 0])
-    h_b = np.broadcast_to(hinv[:, None], (N, skel.num_bodies, 4))
     root = k.body_pos[:, 0]
-    rel = R.rotate(h_b, k.body_pos - root[:, None])
-    return HeadingFrame(hinv, h_b, root, rel, R.rotate(h_b, k.lin_vel))
+    h_t = np.swapaxes(R.to_matrix(heading_inverse(k.body_rot[:, 0])), 1, 2)
+    rel = np.matmul(k.body_pos - root[:, None], h_t)
+    body_mat = R.to_matrix(k.body_rot) if k.body_mat is None else k.body_mat
+    return HeadingFrame(h_t, body_mat, root, rel, np.matmul(k.lin_vel, h_t))
+
+
+def _first_two_columns(m: np.ndarray) -> np.ndarray:
+    """(..., 3, 3) rotation matrices -> (..., 6): their first two columns (the 6-D rotation features)."""
+    return np.concatenate([m[..., :, 0], m[..., :, 1]], axis=-1)
 
 
 def policy_state(k: Kinematics, f: HeadingFrame | None = None) -> np.ndarray:
@@ -82,18 +89,16 @@ def policy_state(k: Kinematics, f: HeadingFrame | None = None) -> np.ndarray:
     _, ee = _indices()
     f = heading_frame(k) if f is None else f
     N = k.body_pos.shape[0]
-    rot = _rot6(R.multiply(f.h_b, k.body_rot))
-    ang = R.rotate(f.h_b, k.ang_vel)
-    com = R.rotate(f.hinv, k.com - f.root)
-    com_v = R.rotate(f.hinv, k.com_vel)
+    h = np.swapaxes(f.h_t, 1, 2)  # the heading matrix itself
+    rot = _first_two_columns(np.matmul(h[:, None], f.body_mat))
     parts = [
         f.root[:, 1:2],
         f.rel[:, 1:].reshape(N, -1),
         rot.reshape(N, -1),
         f.lin.reshape(N, -1),
-        ang.reshape(N, -1),
-        com,
-        com_v,
+        f.rotate(k.ang_vel).reshape(N, -1),
+        f.rotate(k.com - f.root),
+        f.rotate(k.com_vel),
         f.rel[:, ee].reshape(N, -1),
     ]
     return np.concatenate(parts, axis=1)
@@ -104,15 +109,14 @@ def disc_obs(k: Kinematics, f: HeadingFrame | None = None) -> np.ndarray:
     skel, ee = _indices()
     f = heading_frame(k) if f is None else f
     N = k.body_pos.shape[0]
-    ang_root = R.rotate(f.hinv, k.ang_vel[:, 0])
     joints = skel.clip_joint_bodies
     parents = skel.parents[joints]
-    local = R.multiply(R.conjugate(k.body_rot[:, parents]), k.body_rot[:, joints])
+    local = np.matmul(np.swapaxes(f.body_mat[:, parents], -1, -2), f.body_mat[:, joints])  # R_parent^T R_child
     parts = [
         f.root[:, 1:2],
         f.lin[:, 0],
-        ang_root,
-        _rot6(local).reshape(N, -1),
+        f.rotate(k.ang_vel[:, 0]),
+        _first_two_columns(local).reshape(N, -1),
         f.lin[:, 1:].reshape(N, -1),
         f.rel[:, ee].reshape(N, -1),
     ]
@@ -149,7 +153,8 @@ def sim_kinematics(sim, rows: np.ndarray | slice = slice(None)) -> Kinematics:
     mass = sim.model.body_subtreemass[1]
     # COM velocity = mass-weighted body COM velocities; body COM = frame origin + rotated local offset
     skel = load_skeleton()
-    offset = R.rotate(rot, np.broadcast_to(skel.com_local, pos.shape))
+    body_mat = R.to_matrix(rot)
+    offset = np.matmul(body_mat, skel.com_local[:, :, None])[..., 0]  # body COM - frame origin, world
     com_vel_bodies = lin + R.cross(ang, offset)
     com_vel = np.einsum("nbi,b->ni", com_vel_bodies, skel.masses) / mass
-    return Kinematics(pos, rot, lin, ang, com.copy(), com_vel)
+    return Kinematics(pos, rot, lin, ang, com.copy(), com_vel, body_mat)

@@ -8,6 +8,7 @@ demonstration pairs vs policy pairs (half fresh, half from the replay buffer).
 
 from __future__ import annotations
 
+import functools
 import time
 from dataclasses import dataclass, field
 
@@ -53,8 +54,9 @@ class Agent:
     device: str = "cpu"  # torch device of networks, rollout storage, replay and (off the CPU) demonstration pairs
     device_generator: torch.Generator | None = None  # off the CPU: draws demonstration pairs on the device
 
-    @property
+    @functools.cached_property
     def conditional(self) -> bool:
+        """cGAIL (command-conditioned) or AMP; read once (the rollout asks every control step)."""
         return bool(self.cfg.cgail.conditional)
 
     @property
