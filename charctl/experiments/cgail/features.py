@@ -16,6 +16,7 @@ y is up and +z the character's right (the paper's frame with z forward is this o
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -45,7 +46,9 @@ def heading_inverse(root_rot: np.ndarray) -> np.ndarray:
     return R.heading_quat(-R.yaw_about_y(root_rot))
 
 
+@functools.lru_cache(maxsize=1)
 def _indices():
+    """(skeleton, end-effector body indices), built once."""
     skel = load_skeleton()
     ee = np.array([skel.index(n) for n in END_EFFECTORS])
     return skel, ee
@@ -72,6 +75,7 @@ class HeadingFrame:
 
 
 def heading_frame(k: Kinematics) -> HeadingFrame:
+    """The shared heading-frame terms of a batch (reuses `k.body_mat` when the caller has it)."""
     root = k.body_pos[:, 0]
     h_t = np.swapaxes(R.to_matrix(heading_inverse(k.body_rot[:, 0])), 1, 2)
     rel = np.matmul(k.body_pos - root[:, None], h_t)
