@@ -194,6 +194,7 @@ class _Driver:
     actors: dict[int, object] = field(default_factory=dict)
     presses: int = 0
     signum: int = 0
+    pending: int = 0  # signal presses not yet acted on
 
     def run(self, valid: dict[int, JobSpec], jobs: list[list[str]]) -> dict[int, JobResult]:
         ray = self.ray
@@ -208,9 +209,9 @@ class _Driver:
         results: dict[int, JobResult] = {}
         with self._signals():
             while refs:
-                try:
-                    self._poll(refs, status, results, jobs)
-                except KeyboardInterrupt:
+                self._poll(refs, status, results, jobs)
+                while self.pending > 0:  # presses that arrived during the poll, handled between Ray calls
+                    self.pending -= 1
                     self._on_interrupt()
         if self.signum:
             self._raise_interrupted(results)
@@ -263,21 +264,24 @@ class _Driver:
 
     @contextlib.contextmanager
     def _signals(self):
-        """SIGTERM on the driver counts as Ctrl-C while the jobs run (Ray's own handler would just exit)."""
+        """While the jobs run, Ctrl-C (SIGINT) and SIGTERM on the driver only count a press; the poll loop
+        acts on it between Ray calls. (Raised as KeyboardInterrupt, a press could land inside one of
+        Ray's own calls and leave its client half-way; Ray's SIGTERM handler would just exit.)"""
 
-        def on_term(signum, frame) -> None:  # noqa: ARG001
+        def on_signal(signum, frame) -> None:  # noqa: ARG001
             self.signum = self.signum or int(signum)
-            raise KeyboardInterrupt
+            self.pending += 1
 
         try:
-            old = signal.signal(signal.SIGTERM, on_term)
+            old = {sig: signal.signal(sig, on_signal) for sig in (signal.SIGINT, signal.SIGTERM)}
         except ValueError:  # not the main thread
             yield
             return
         try:
             yield
         finally:
-            signal.signal(signal.SIGTERM, old)
+            for sig, handler in old.items():
+                signal.signal(sig, handler)
 
     def _raise_interrupted(self, results: dict[int, JobResult]) -> None:
         stopped = [r for r in results.values() if r.state == "interrupted" and r.run_dir]
