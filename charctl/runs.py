@@ -161,14 +161,14 @@ def new_run(cfg, experiment: str | None = None) -> Run:
     stamp = datetime.now().strftime("%Y-%m-%d_%H-%M-%S")
     run_dir = root / stamp
     try:
-        run_dir = _make_unique_dir(root, stamp)
+        run_dir = make_unique_dir(root, stamp)
         atomic_write_text(run_dir / "config.yaml", to_yaml(cfg))
     except OSError as exc:
         raise os_error(exc, "cannot create the run directory", run_dir) from None
     return Run(dir=run_dir, experiment=experiment, cfg=cfg)
 
 
-def _make_unique_dir(root: Path, stamp: str) -> Path:
+def make_unique_dir(root: Path, stamp: str) -> Path:
     """Create `root/stamp`, or `stamp_1`, `stamp_2` ... when taken: two runs in the same second
     (multirun, tests, jobs started side by side by another process) each get their own folder."""
     root.mkdir(parents=True, exist_ok=True)

@@ -567,17 +567,10 @@ def _number(text: str) -> float | None:
 
 def make_out_dir(output_root: str | Path, experiment: str) -> Path:
     """`<output_root>/tune/<experiment>/<timestamp>/` (absolute; `_1`, `_2` ... when taken)."""
+    from charctl.runs import make_unique_dir
+
     root = Path(output_root).expanduser().resolve() / "tune" / experiment
-    stamp = datetime.now().strftime("%Y-%m-%d_%H-%M-%S")
     try:
-        root.mkdir(parents=True, exist_ok=True)
-        n = 0
-        while True:
-            path = root / (stamp if n == 0 else f"{stamp}_{n}")
-            try:
-                path.mkdir()
-                return path
-            except FileExistsError:
-                n += 1
+        return make_unique_dir(root, datetime.now().strftime("%Y-%m-%d_%H-%M-%S"))
     except OSError as exc:
         raise CharctlError(f"cannot create the tune folder in {root}: {exc.strerror or exc}") from None
