@@ -88,6 +88,7 @@ class RunnerSettings:
 
     total_samples: int
     checkpoint_every: int = 10  # iterations
+    keep_every: int = 0  # samples between checkpoints kept as checkpoints/samples_<n>.pt (0 = only last.pt)
     log_every: int = 1  # iterations
     description: str = "training"
     blowup_threshold: float = 0.01  # simulator resets per sample above which a sustained rate is warned
@@ -155,6 +156,16 @@ def _stop_if_diverged(learner: Learner, run, stats: dict[str, float]) -> None:
         raise
 
 
+def crossed_multiple(samples: int, step: int, every: int) -> bool:
+    """True when the count went past a multiple of `every` in its last `step` (never for every <= 0)."""
+    return every > 0 and samples // every > (samples - step) // every
+
+
+def kept_checkpoint_name(samples: int) -> str:
+    """File name of a kept checkpoint: samples_000123456.pt (sorts by sample count)."""
+    return f"samples_{samples:09d}.pt"
+
+
 def run_on_policy(learner: Learner, run, settings: RunnerSettings) -> dict:
     """Train `learner` until `settings.total_samples`, writing into `run` (charctl.runs.Run)."""
     from charctl.progress import TrainingProgress
@@ -193,6 +204,12 @@ def run_on_policy(learner: Learner, run, settings: RunnerSettings) -> dict:
             bar.update(learner.samples_per_iteration, **fields)
             if learner.iteration % settings.checkpoint_every == 0 or stop.requested:
                 run.save_checkpoint(with_rng_states(learner.state_dict()), learner.signature())
+            if crossed_multiple(learner.samples, learner.samples_per_iteration, settings.keep_every):
+                run.save_checkpoint(
+                    with_rng_states(learner.state_dict()),
+                    learner.signature(),
+                    name=kept_checkpoint_name(learner.samples),
+                )
             if stop.requested:
                 break
     if stop.requested:

@@ -62,6 +62,11 @@ class EnvConfig:
     curriculum_samples: int = 2_000_000
     ramp_frames: int = 60  # eq 4.10-4.11: linear command ramp length (control frames); 0 = switch in one frame
     switch_prob: float = 0.01  # per control step, probability of re-sampling the command within an episode
+    # Fall-weighted commands (prioritised sampling of hard motions, as ProtoMotions/PHC do): this share of
+    # the commands drawn at resets and switches is drawn in proportion to each skill's recent fall rate,
+    # the rest uniformly. 0 = uniform (the paper). docs/cgail.md, "Ten skills".
+    skill_fall_weight: float = 0.0
+    skill_fall_halflife: float = 200.0  # episodes of a skill after which its fall-rate estimate has half forgotten
     action_scale: float = 1.0  # PD target (rad) = rest pose + action_scale * action
     fall_tolerance: float = 0.005  # m: a non-foot body this close to the ground ends the episode (a fall)
     goal_max_angle_deg: float = 45.0  # new heading goals lie within +- this angle of the current heading
@@ -107,6 +112,9 @@ class TrainConfig:
     total_samples: int = 150_000_000  # environment steps over the whole run (paper: 1.5e8 samples)
     rollout_steps: int = 32  # control steps per env per PPO iteration
     checkpoint_every: int = 10  # iterations between checkpoints
+    # samples between checkpoints also kept as checkpoints/samples_<n>.pt beside last.pt, so any of them can
+    # be evaluated later (charctl eval RUN --checkpoint samples_<n>.pt); 0 = only last.pt
+    keep_checkpoint_every: int = 0
     log_every: int = 1
     torch_threads: int = 2
 
@@ -154,6 +162,14 @@ class Config(BaseConfig):
             )
         if cfg.env.curriculum_samples < 1:
             return "env.curriculum_samples must be >= 1"
+        if not 0.0 <= cfg.env.skill_fall_weight <= 1.0:
+            return f"env.skill_fall_weight must lie in [0, 1], got {cfg.env.skill_fall_weight}"
+        if cfg.env.skill_fall_halflife <= 0:
+            return f"env.skill_fall_halflife must be > 0 episodes, got {cfg.env.skill_fall_halflife}"
+        if cfg.env.skill_fall_weight > 0 and cfg.env.backend != "cpu":
+            return "env.skill_fall_weight > 0 is implemented for env.backend=cpu only"
+        if cfg.train.keep_checkpoint_every < 0:
+            return "train.keep_checkpoint_every must be >= 0 samples (0 = keep only last.pt)"
         if cfg.env.ramp_frames < 0:
             return "env.ramp_frames must be >= 0"
         if cfg.env.backend not in ("cpu", "warp", "auto"):

@@ -79,6 +79,29 @@ class StepResult:
     unstable: np.ndarray  # (N,) bool: simulator blow-up this step
 
 
+def update_fall_rates(
+    rates: np.ndarray, ended_skill: np.ndarray, ended_fell: np.ndarray, halflife: float
+) -> np.ndarray:
+    """Per-skill exponential moving average of the fall indicator over ended episodes.
+
+    `rates` (K,) in [0, 1]; `ended_skill` (n,) the command of each episode that just ended, `ended_fell`
+    (n,) whether it ended by a fall. A skill with m ended episodes and f falls moves to
+    a^m rates + (1 - a^m) f/m with a = 0.5^(1/halflife): its memory halves every `halflife` episodes."""
+    K = len(rates)
+    m = np.bincount(ended_skill, minlength=K).astype(np.float64)
+    f = np.bincount(ended_skill, weights=ended_fell.astype(np.float64), minlength=K)
+    keep = 0.5 ** (m / halflife)
+    return keep * rates + (1.0 - keep) * (f / np.maximum(m, 1.0))
+
+
+def skill_probabilities(rates: np.ndarray, fall_weight: float, floor: float = 1e-3) -> np.ndarray:
+    """(K,) command probabilities: (1 - fall_weight) uniform + fall_weight in proportion to
+    `rates` + `floor` (the floor keeps a share for skills that never fall)."""
+    K = len(rates)
+    w = rates + floor
+    return (1.0 - fall_weight) / K + fall_weight * w / w.sum()
+
+
 class CgailEnv:
     def __init__(
         self, skills: list[SkillData], env_cfg, seed: int = 0, conditional: bool = True, tracking: bool = False
@@ -113,6 +136,7 @@ class CgailEnv:
         self.obs_dim = self.state_dim
         self.episode_return_goal = np.zeros(self.N)
         self.fall_count = 0
+        self.fall_rate = np.full(self.K, 0.5)  # per-skill recent fall rate (env.skill_fall_weight)
         self._state = np.zeros((self.N, self.state_dim))
         self._obs = np.zeros((self.N, DISC_OBS_DIM))
         self.reset(np.arange(self.N))
@@ -159,7 +183,7 @@ class CgailEnv:
         ids = np.asarray(ids, dtype=np.int64)
         if ids.size == 0:
             return
-        skill = self.rng.integers(0, self.K, size=len(ids))
+        skill = self._sample_skills(len(ids))
         if self.forced_command is not None:
             forced = self.forced_command[ids]
             skill = np.where(forced >= 0, forced, skill)
@@ -255,6 +279,8 @@ class CgailEnv:
         truncated = ((self.steps >= self.max_steps) | clip_ended) & ~terminated
         self.fall_count += int(fell.sum())
         done = np.flatnonzero(terminated | truncated)
+        if done.size:
+            self.fall_rate = update_fall_rates(self.fall_rate, self.cmd[done], fell[done], self.cfg.skill_fall_halflife)
         state, obs = final_state.copy(), pair_next.copy()
         self._state, self._obs = state, obs
         self._advance_ramp()
@@ -280,4 +306,11 @@ class CgailEnv:
             return
         ids = ids[self.rng.random(ids.size) < self.cfg.switch_prob]
         if ids.size:
-            self.set_command(ids, self.rng.integers(0, self.K, size=ids.size))
+            self.set_command(ids, self._sample_skills(ids.size))
+
+    def _sample_skills(self, n: int) -> np.ndarray:
+        """(n,) commands: uniform, or partly fall-weighted (env.skill_fall_weight)."""
+        if self.cfg.skill_fall_weight <= 0 or self.K < 2:
+            return self.rng.integers(0, self.K, size=n)
+        p = skill_probabilities(self.fall_rate, self.cfg.skill_fall_weight)
+        return self.rng.choice(self.K, size=n, p=p)

@@ -512,6 +512,8 @@ class CgailLearner(AgentCounters):
             "perf/frac_ppo": (t3 - t2) / (t4 - t0),
             "perf/frac_disc": (t4 - t3) / (t4 - t0),
         }
+        if agent.conditional and hasattr(env, "fall_rate"):
+            stats.update({f"fall_rate/{sk.name}": float(r) for sk, r in zip(agent.skills, env.fall_rate)})
         if agent.conditional:
             stats["train/r_class"] = float(rew["r_class"].mean())
             stats.update(class_accuracy_on_policy(agent, ro, rew["probs"]))
@@ -550,6 +552,7 @@ def train(cfg, run) -> dict:
     settings = RunnerSettings(
         total_samples=int(cfg.train.total_samples),
         checkpoint_every=int(cfg.train.checkpoint_every),
+        keep_every=int(cfg.train.keep_checkpoint_every),
         log_every=int(cfg.train.log_every),
         description=f"cgail ({kind}, {learner.agent.num_skills} skills)",
     )
