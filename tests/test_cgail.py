@@ -209,3 +209,74 @@ def test_episode_length_curriculum_by_hand():
     assert [episode_limit_steps(off, n) for n in (0, 10**7)] == [150, 150]
     with pytest.raises(CharctlError, match="curriculum_start_seconds"):
         compose_config("cgail", ["scale=smoke", "env.curriculum_start_seconds=99"], Config)
+
+
+def test_fall_rate_average_and_skill_probabilities_by_hand():
+    """Halflife 2 episodes: a skill with 2 ended episodes, 1 fall, keeps 0.5 of its old rate 0.5 and takes
+    0.5 of 1/2 -> 0.5; one with 4 episodes, all falls, keeps 0.25 of 0.2 -> 0.05 + 0.75 = 0.8; a skill with
+    no ended episode keeps its rate. Probabilities: weight 0.5 over K=3 -> 1/6 each plus 0.5 * share of
+    (rate + 0.001)."""
+    from charctl.experiments.cgail.env import skill_probabilities, update_fall_rates
+
+    rates = np.array([0.5, 0.2, 0.3])
+    skill = np.array([0, 0, 1, 1, 1, 1])
+    fell = np.array([True, False, True, True, True, True])
+    new = update_fall_rates(rates, skill, fell, halflife=2.0)
+    np.testing.assert_allclose(new, [0.5, 0.8, 0.3])
+    p = skill_probabilities(np.array([0.0, 0.3, 0.699]), 0.5)
+    np.testing.assert_allclose(p, np.array([1, 1, 1]) / 6 + 0.5 * np.array([0.001, 0.301, 0.7]) / 1.002)
+    assert p.sum() == pytest.approx(1.0)
+    np.testing.assert_allclose(skill_probabilities(np.array([0.9, 0.1]), 0.0), [0.5, 0.5])
+
+
+def test_fall_weighted_commands_favour_the_falling_skill():
+    """With skill_fall_weight 1 and skill 1 the only one falling, resets draw skill 1 about
+    (0.9 + 0.001) / (0.9 + 0.001 + 0.001) = 99.8 % of the time; with weight 0 about half."""
+    from omegaconf import OmegaConf
+
+    from charctl.experiments.cgail.config import EnvConfig, SkillConfig
+    from charctl.experiments.cgail.env import CgailEnv
+    from charctl.experiments.cgail.skills import load_skills
+
+    skills = load_skills([SkillConfig("walk", "humanoid3d_walk.txt"), SkillConfig("jump", "humanoid3d_jump.txt")], 30.0)
+    env = CgailEnv(skills, OmegaConf.structured(EnvConfig(num_envs=8, skill_fall_weight=1.0)), seed=3)
+    env.fall_rate = np.array([0.0, 0.9])
+    draws = env._sample_skills(4000)
+    assert 0.99 < draws.mean() <= 1.0
+    env.cfg.skill_fall_weight = 0.0
+    assert abs(env._sample_skills(4000).mean() - 0.5) < 0.05
+
+
+def test_fall_weight_config_errors():
+    from charctl.config import compose_config
+    from charctl.errors import CharctlError
+    from charctl.experiments.cgail.config import Config
+
+    with pytest.raises(CharctlError, match="skill_fall_weight must lie in"):
+        compose_config("cgail", ["scale=smoke", "env.skill_fall_weight=1.5"], Config)
+    with pytest.raises(CharctlError, match="skill_fall_halflife"):
+        compose_config("cgail", ["scale=smoke", "env.skill_fall_halflife=0"], Config)
+    with pytest.raises(CharctlError, match="keep_checkpoint_every"):
+        compose_config("cgail", ["scale=smoke", "train.keep_checkpoint_every=-1"], Config)
+
+
+def test_kept_checkpoints_are_evaluated_by_name(smoke_run_copy):
+    """Resuming the smoke run (512 samples, 128 per iteration) to 1024 with train.keep_checkpoint_every=256
+    passes 640, 768, 896, 1024: the multiples of 256 crossed are 768 and 1024, so exactly those two are kept.
+    `load_trained_run(RUN, name)` loads the named one, and a path or a missing name is a one-line error."""
+    from charctl.commands.train import train_command
+    from charctl.errors import CharctlError
+    from charctl.experiments.cgail.policy import load_trained_run
+    from charctl.runs import load_checkpoint
+
+    run_dir = smoke_run_copy("cgail")
+    train_command("cgail", ["train.total_samples=1024", "train.keep_checkpoint_every=256"], resume=run_dir)
+    kept = sorted(p.name for p in (run_dir / "checkpoints").glob("samples_*.pt"))
+    assert kept == ["samples_000000768.pt", "samples_000001024.pt"]
+    assert load_checkpoint(run_dir / "checkpoints" / kept[0], "cgail")["samples"] == 768
+    tr = load_trained_run(run_dir, kept[0])
+    assert tr.agent.samples == 768
+    with pytest.raises(CharctlError, match="file name inside"):
+        load_trained_run(run_dir, "../last.pt")
+    with pytest.raises(CharctlError, match="checkpoint not found"):
+        load_trained_run(run_dir, "samples_000000001.pt")

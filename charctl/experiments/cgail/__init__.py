@@ -10,6 +10,12 @@ from pathlib import Path
 from charctl.experiments import BVH, EPISODES, OUT, SECONDS, VIDEO, Experiment, Option
 
 _PKG = "charctl.experiments.cgail"
+CHECKPOINT = Option(
+    "checkpoint",
+    "file in RUN/checkpoints/ to use instead of last.pt (e.g. samples_020000000.pt, train.keep_checkpoint_every)",
+    str,
+    metavar="FILE",
+)
 
 EXPERIMENT = Experiment(
     name="cgail",
@@ -29,6 +35,7 @@ EXPERIMENT = Experiment(
         ),
         EPISODES,
         OUT,
+        CHECKPOINT,
     ),
     export_options=(
         Option("onnx", "export the policy (normaliser built in) as ONNX", Path),
@@ -37,6 +44,7 @@ EXPERIMENT = Experiment(
         VIDEO,
         Option("commands", 'command schedule, e.g. "walk:0,run:3,kick:6" (seconds)', str),
         SECONDS,
+        CHECKPOINT,
     ),
     provides={"push_rollout": f"{_PKG}.push"},
     tune_metrics={"train/episode_length": "max", "train/r_style": "max"},  # steps before a fall; style reward r_S

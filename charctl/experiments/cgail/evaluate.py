@@ -26,7 +26,13 @@ import torch.nn.functional as F
 from charctl.errors import CharctlError
 from charctl.eval.dtw import dtw_align
 from charctl.eval.pose import pose_error_matrix
-from charctl.experiments.cgail.policy import TrainedRun, load_trained_run, local_joint_rotations, resolve_run_dirs
+from charctl.experiments.cgail.policy import (
+    TrainedRun,
+    checkpoint_name,
+    load_trained_run,
+    local_joint_rotations,
+    resolve_run_dirs,
+)
 
 EVAL_OVERRIDES = ("output_root", "device")  # the only key=value overrides `charctl eval cgail` takes
 
@@ -98,12 +104,12 @@ def eval_device(name: str) -> str:
     return resolve_device(str(name))
 
 
-def load_eval_run(run_dir: str | Path, device: str | None = None) -> DeviceRun:
+def load_eval_run(run_dir: str | Path, device: str | None = None, checkpoint: str | None = None) -> DeviceRun:
     """The run's agent with its policy and discriminator on torch `device` (None: the run's configured
     `device`, resolved). The checkpoint is read with `torch.load(weights_only=True,
     map_location="cpu")`: its random-number states must stay CPU ByteTensors for
     `torch.set_rng_state`; only the two inference networks move to the device."""
-    tr = load_trained_run(run_dir)
+    tr = load_trained_run(run_dir, checkpoint)
     dev = device if device is not None else eval_device(str(tr.cfg.get("device", "auto")))
     tr.agent.model.to(dev)
     tr.agent.disc.to(dev)
@@ -489,7 +495,9 @@ def evaluate(targets: list[str], options: dict, overrides: list[str]) -> None:
     """The modes given in `options` (--dtw, --confusion, --switch, --curves, --survival) over the runs."""
     device, overrides = split_eval_overrides(overrides)
     run_dirs = resolve_run_dirs(targets, overrides, "eval")
-    out = Path(options.get("out") or run_dirs[0] / "eval")
+    checkpoint = options.get("checkpoint")
+    default_out = run_dirs[0] / "eval" / Path(checkpoint_name(checkpoint)).stem if checkpoint else run_dirs[0] / "eval"
+    out = Path(options.get("out") or default_out)
     out.mkdir(parents=True, exist_ok=True)
     _append_report(
         out,
@@ -506,7 +514,7 @@ def evaluate(targets: list[str], options: dict, overrides: list[str]) -> None:
     needs_policy = options.get("dtw") or options.get("confusion") or options.get("switch") or options.get("survival")
     if not needs_policy:
         return
-    runs = [load_eval_run(d, device) for d in run_dirs]
+    runs = [load_eval_run(d, device, checkpoint) for d in run_dirs]
     if options.get("survival"):
         eval_survival(runs, max(episodes, 1), float(options["survival"]), out)
     if options.get("dtw"):

@@ -114,7 +114,7 @@ def schedule_rollout(tr: TrainedRun, schedule: list[tuple[float, int]], seconds:
 def export(target: str, options: dict, overrides: list[str]) -> None:
     """--onnx / --torchscript of the policy, --bvh / --video of a commanded rollout (--commands, --seconds)."""
     (run_dir,) = resolve_run_dirs([target], overrides, "export")
-    tr = load_trained_run(run_dir)
+    tr = load_trained_run(run_dir, options.get("checkpoint"))
     # every argument is checked before anything is written (the schedule names the run's skills)
     names = tr.skill_names
     schedule = parse_schedule(options.get("commands") or f"{names[0]}:0", names)
