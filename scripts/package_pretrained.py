@@ -29,8 +29,9 @@ def thinned_indices(n: int, max_points: int) -> np.ndarray:
     return np.unique(np.linspace(0, n - 1, max_points).round().astype(int))
 
 
-def write_thinned_scalars(src: Path, dest: Path, max_points: int) -> None:
-    """Every scalar tag of the event files under `src`, thinned, into one event file under `dest`."""
+def write_thinned_scalars(src: Path, dest: Path, max_points: int, max_step: int | None = None) -> None:
+    """Every scalar tag of the event files under `src` (steps <= `max_step` when given), thinned to
+    `max_points` per tag (0 = all), into one event file under `dest`."""
     from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
     from torch.utils.tensorboard import SummaryWriter
 
@@ -38,8 +39,9 @@ def write_thinned_scalars(src: Path, dest: Path, max_points: int) -> None:
     acc.Reload()
     writer = SummaryWriter(str(dest))
     for tag in acc.Tags().get("scalars", []):
-        events = acc.Scalars(tag)
-        for i in thinned_indices(len(events), max_points):
+        events = [e for e in acc.Scalars(tag) if max_step is None or e.step <= max_step]
+        keep = thinned_indices(len(events), max_points) if max_points > 0 else range(len(events))
+        for i in keep:
             e = events[i]
             writer.add_scalar(tag, e.value, e.step, walltime=e.wall_time)
     writer.close()
@@ -50,22 +52,45 @@ def main() -> None:
     ap.add_argument("run_dir", type=Path)
     ap.add_argument("dest", type=Path)
     ap.add_argument("--max-points", type=int, default=500, help="points kept per scalar tag (0 = all, files copied)")
+    ap.add_argument(
+        "--checkpoint",
+        default="last.pt",
+        help="file in RUN/checkpoints/ to ship as last.pt (e.g. a kept samples_<n>.pt); the scalars are cut at its "
+        "sample count and metrics.json records which one it was",
+    )
     a = ap.parse_args()
+    import json
+
     import torch
 
     from charctl.runs import run_experiment
 
     experiment = run_experiment(a.run_dir)
-    payload = torch.load(a.run_dir / "checkpoints" / "last.pt", map_location="cpu", weights_only=True)
+    source = a.run_dir / "checkpoints" / Path(a.checkpoint).name
+    if not source.is_file():
+        raise SystemExit(f"error: checkpoint not found: {source}")
+    payload = torch.load(source, map_location="cpu", weights_only=True)
     payload["state"].pop("replay", None)
+    chosen = source.name != "last.pt"
     a.dest.mkdir(parents=True, exist_ok=True)
     for name in ("config.yaml", "metrics.json"):  # an interrupted run has no metrics.json
         if (a.run_dir / name).is_file():
             shutil.copy2(a.run_dir / name, a.dest / name)
+    if chosen:
+        metrics_path = a.dest / "metrics.json"
+        metrics = json.loads(metrics_path.read_text()) if metrics_path.is_file() else {}
+        metrics["packaged_checkpoint"] = {
+            "file": source.name,
+            "samples": int(payload["state"]["samples"]),
+            "iteration": int(payload["state"]["iteration"]),
+            "note": "the other entries describe the end of the run; the shipped checkpoint is this earlier one",
+        }
+        metrics_path.write_text(json.dumps(metrics, indent=2))
     if (a.dest / "tb").exists():
         shutil.rmtree(a.dest / "tb")
-    if a.max_points > 0:
-        write_thinned_scalars(a.run_dir / "tb", a.dest / "tb", a.max_points)
+    if a.max_points > 0 or chosen:
+        max_step = int(payload["state"]["samples"]) if chosen else None
+        write_thinned_scalars(a.run_dir / "tb", a.dest / "tb", a.max_points, max_step)
     else:
         shutil.copytree(a.run_dir / "tb", a.dest / "tb")
     (a.dest / "checkpoints").mkdir(exist_ok=True)

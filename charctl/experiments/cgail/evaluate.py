@@ -229,12 +229,13 @@ def survival_rollout(tr: DeviceRun, skill: int, episodes: int, seconds: float, s
     return out
 
 
-def eval_survival(runs: list[DeviceRun], episodes: int, seconds: float, out: Path) -> dict:
-    """Share of episodes without a fall (and classifier accuracy on policy motion) per skill and run."""
+def eval_survival(runs: list[DeviceRun], episodes: int, seconds: float, out: Path, seed: int = 4321) -> dict:
+    """Share of episodes without a fall (and classifier accuracy on policy motion) per skill and run;
+    `seed` draws the RSI frames and headings (the same for every run, so runs are compared on equal starts)."""
     table: dict[str, dict[str, float]] = {}
     for tr in runs:
         for k, s in enumerate(tr.skill_names):
-            r = survival_rollout(tr, k, episodes, seconds, seed=4321)
+            r = survival_rollout(tr, k, episodes, seconds, seed=seed)
             row = table.setdefault(s, {})
             row[f"{tr.label} no-fall"] = r["no_fall"]
             if "class_acc_policy" in r:
@@ -243,6 +244,7 @@ def eval_survival(runs: list[DeviceRun], episodes: int, seconds: float, out: Pat
         "table": table,
         "episodes": episodes,
         "seconds": seconds,
+        "seed": seed,
         "runs": {tr.label: str(tr.run_dir) for tr in runs},
         "metric": "no-fall: share of episodes without a non-foot ground contact (RSI at random frames and "
         "headings, mean actions); class acc: classifier argmax == command on the policy's pairs",
@@ -256,14 +258,14 @@ def eval_survival(runs: list[DeviceRun], episodes: int, seconds: float, out: Pat
     return result
 
 
-def eval_confusion(tr: DeviceRun, episodes: int, out: Path) -> dict:
+def eval_confusion(tr: DeviceRun, episodes: int, out: Path, seed: int = 99) -> dict:
     """Fig 6.8: mean classifier probabilities per commanded skill (policy) and per clip (data)."""
     if not tr.agent.conditional:
         raise CharctlError(f"{tr.run_dir} is an AMP (unconditional) run: it has no classifier for --confusion")
     K = len(tr.skill_names)
     policy = np.zeros((K, K))
     for k in range(K):
-        ro = rollout_skill(tr, k, episodes, 3.0, seed=99)
+        ro = rollout_skill(tr, k, episodes, 3.0, seed=seed)
         policy[k] = ro.probs.mean(0)
     data = np.zeros((K, K))
     with torch.no_grad():

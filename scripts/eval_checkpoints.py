@@ -1,0 +1,165 @@
+"""Evaluate every kept checkpoint of a cgail run (train.keep_checkpoint_every) and pick one.
+
+    .venv/bin/python scripts/eval_checkpoints.py RUN_DIR [--seconds 5] [-k 64] [--confusion-k 16]
+        [--min-no-fall 0.8] [--min-diagonal 0.9] [--confirm-seed 7]
+
+For each checkpoints/samples_<n>.pt (and last.pt) it runs what `charctl eval RUN --checkpoint F
+--survival SECONDS -k K` and `--confusion -k CK` run, into RUN/eval/<checkpoint>/, then writes
+
+- RUN/eval/checkpoints.json and checkpoints.md: per checkpoint, every skill's no-fall share and
+  Fig 6.8 diagonal (mean classifier probability of the commanded skill on the policy's motion),
+  the worst of each, and whether both targets hold;
+- RUN/eval/checkpoints.png: worst no-fall and lowest diagonal against samples, with the targets.
+
+Selection: the checkpoint that meets both targets with the largest margin (the smaller of worst
+no-fall - min_no_fall and min diagonal - min_diagonal), else the one closest to meeting them. Picking
+the best of many noisy estimates favours a lucky one, so the chosen checkpoint is evaluated again on
+fresh starts (`--confirm-seed`, a different seed from the selection's); both results are reported.
+"""
+
+from __future__ import annotations
+
+import argparse
+import re
+from pathlib import Path
+
+import numpy as np
+import torch
+
+
+def kept_checkpoints(run_dir: Path) -> list[tuple[int, str]]:
+    """(samples, file name) of RUN/checkpoints/samples_*.pt and last.pt, by sample count."""
+    from charctl.runs import load_checkpoint
+
+    found = []
+    for p in sorted((run_dir / "checkpoints").glob("samples_*.pt")):
+        m = re.fullmatch(r"samples_(\d+)\.pt", p.name)
+        if m:
+            found.append((int(m.group(1)), p.name))
+    last = run_dir / "checkpoints" / "last.pt"
+    if last.is_file():
+        n = int(load_checkpoint(last, "cgail")["samples"])
+        if all(n != s for s, _ in found):
+            found.append((n, "last.pt"))
+    return sorted(found)
+
+
+def margin(worst_no_fall: float, min_diagonal: float, min_no_fall: float, min_diag: float) -> float:
+    """How far a checkpoint clears both targets (negative: how far it misses the worse one)."""
+    return min(worst_no_fall - min_no_fall, min_diagonal - min_diag)
+
+
+def evaluate_checkpoint(run_dir: Path, name: str, seconds: float, k: int, ck: int, seed: int, out: Path) -> dict:
+    """No-fall and Fig 6.8 diagonal per skill of one checkpoint."""
+    from charctl.experiments.cgail.evaluate import eval_confusion, eval_survival, load_eval_run
+
+    out.mkdir(parents=True, exist_ok=True)
+    tr = load_eval_run(run_dir, "cpu", name)
+    surv = eval_survival([tr], k, seconds, out, seed=seed)
+    conf = eval_confusion(tr, ck, out, seed=seed + 1)
+    no_fall = {s: row[f"{tr.label} no-fall"] for s, row in surv["table"].items()}
+    diagonal = dict(zip(conf["skills"], conf["policy_diagonal"]))
+    return {
+        "checkpoint": name,
+        "samples": int(tr.agent.samples),
+        "no_fall": no_fall,
+        "diagonal": diagonal,
+        "worst_no_fall": min(no_fall.values()),
+        "min_diagonal": min(diagonal.values()),
+        "seed": seed,
+    }
+
+
+def write_report(run_dir: Path, rows: list[dict], chosen: dict | None, confirm: dict | None, a) -> None:
+    from charctl.runs import atomic_write_text, strict_json
+    from charctl.viz.plots import new_figure, save_figure
+
+    out = run_dir / "eval"
+    atomic_write_text(out / "checkpoints.json", strict_json({"rows": rows, "chosen": chosen, "confirm": confirm}))
+    skills = list(rows[0]["no_fall"])
+    lines = [
+        f"# Kept checkpoints of {run_dir.name}",
+        "",
+        f"no-fall: {a.k} episodes of {a.seconds:g} s per skill; diagonal: Fig 6.8 mean P(commanded skill) over "
+        f"{a.confusion_k} episodes. Targets: no-fall >= {a.min_no_fall}, diagonal >= {a.min_diagonal}.",
+        "",
+        "| samples | worst no-fall | min diagonal | meets both | " + " | ".join(skills) + " |",
+        "|---:|---:|---:|---|" + "---|" * len(skills),
+    ]
+    for r in rows:
+        cells = [f"{r['no_fall'][s]:.2f} / {r['diagonal'][s]:.2f}" for s in skills]
+        ok = r["worst_no_fall"] >= a.min_no_fall and r["min_diagonal"] >= a.min_diagonal
+        lines.append(
+            f"| {r['samples']:,} | {r['worst_no_fall']:.3f} | {r['min_diagonal']:.3f} | {'yes' if ok else 'no'} | "
+            + " | ".join(cells)
+            + " |"
+        )
+    lines.append("")
+    lines.append("Cells: no-fall / diagonal.")
+    if chosen is not None and confirm is not None:
+        lines += [
+            "",
+            f"Chosen: {chosen['checkpoint']} ({chosen['samples']:,} samples). "
+            f"On fresh starts (seed {confirm['seed']}): worst no-fall {confirm['worst_no_fall']:.3f}, "
+            f"min diagonal {confirm['min_diagonal']:.3f}.",
+        ]
+    atomic_write_text(out / "checkpoints.md", "\n".join(lines) + "\n")
+    fig, ax = new_figure(1, 1, figsize=(7, 3.5))
+    x = [r["samples"] / 1e6 for r in rows]
+    ax.plot(x, [r["worst_no_fall"] for r in rows], "o-", label="worst skill's no-fall share")
+    ax.plot(x, [r["min_diagonal"] for r in rows], "s-", label="lowest Fig 6.8 diagonal")
+    ax.axhline(a.min_no_fall, color="C0", ls=":", lw=1)
+    ax.axhline(a.min_diagonal, color="C1", ls=":", lw=1)
+    ax.set_xlabel("samples (millions)")
+    ax.set_ylim(0, 1.02)
+    ax.legend(loc="lower right")
+    ax.set_title(f"{run_dir.name}: kept checkpoints against the targets (dotted)")
+    save_figure(fig, out / "checkpoints.png")
+    print("\n".join(lines))
+
+
+def main() -> None:
+    from charctl.errors import CharctlError
+
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("run_dir", type=Path)
+    ap.add_argument("--seconds", type=float, default=5.0, help="episode length of the no-fall test (s)")
+    ap.add_argument("-k", type=int, default=64, help="episodes per skill for no-fall")
+    ap.add_argument("--confusion-k", type=int, default=16, help="episodes per skill for the Fig 6.8 diagonal")
+    ap.add_argument("--min-no-fall", type=float, default=0.8)
+    ap.add_argument("--min-diagonal", type=float, default=0.9)
+    ap.add_argument("--seed", type=int, default=4321, help="starts of the selection evaluation")
+    ap.add_argument("--confirm-seed", type=int, default=7, help="fresh starts for the chosen checkpoint")
+    ap.add_argument("--after", type=float, default=0.0, help="skip checkpoints before this many samples")
+    a = ap.parse_args()
+    torch.set_num_threads(2)
+    try:
+        found = [(n, f) for n, f in kept_checkpoints(a.run_dir) if n >= a.after]
+        if not found:
+            raise CharctlError(f"{a.run_dir}/checkpoints has no checkpoint to evaluate")
+        rows = []
+        for n, name in found:
+            print(f"--- {name} ({n:,} samples)", flush=True)
+            rows.append(
+                evaluate_checkpoint(
+                    a.run_dir, name, a.seconds, a.k, a.confusion_k, a.seed, a.run_dir / "eval" / Path(name).stem
+                )
+            )
+        scores = [margin(r["worst_no_fall"], r["min_diagonal"], a.min_no_fall, a.min_diagonal) for r in rows]
+        chosen = rows[int(np.argmax(scores))]
+        confirm = evaluate_checkpoint(
+            a.run_dir,
+            chosen["checkpoint"],
+            a.seconds,
+            a.k,
+            a.confusion_k,
+            a.confirm_seed,
+            a.run_dir / "eval" / f"{Path(chosen['checkpoint']).stem}_confirm",
+        )
+        write_report(a.run_dir, rows, chosen, confirm, a)
+    except CharctlError as exc:
+        raise SystemExit(f"error: {exc}") from None
+
+
+if __name__ == "__main__":
+    main()
