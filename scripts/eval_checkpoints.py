@@ -15,11 +15,14 @@ Selection: the checkpoint that meets both targets with the largest margin (the s
 no-fall - min_no_fall and min diagonal - min_diagonal), else the one closest to meeting them. Picking
 the best of many noisy estimates favours a lucky one, so the chosen checkpoint is evaluated again on
 fresh starts (`--confirm-seed`, a different seed from the selection's); both results are reported.
+Each checkpoint's result is kept in RUN/eval/<checkpoint>/row.json: run the script again while the
+training goes on and only the new checkpoints are evaluated (last.pt again when it has moved on).
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import re
 from pathlib import Path
 
@@ -49,17 +52,34 @@ def margin(worst_no_fall: float, min_diagonal: float, min_no_fall: float, min_di
     return min(worst_no_fall - min_no_fall, min_diagonal - min_diag)
 
 
-def evaluate_checkpoint(run_dir: Path, name: str, seconds: float, k: int, ck: int, seed: int, out: Path) -> dict:
-    """No-fall and Fig 6.8 diagonal per skill of one checkpoint."""
-    from charctl.experiments.cgail.evaluate import eval_confusion, eval_survival, load_eval_run
+def cached_row(out: Path, name: str, samples: int, seconds: float, k: int, ck: int, seed: int) -> dict | None:
+    """The row written by an earlier run of this script with the same settings (re-runs evaluate only
+    new checkpoints), or None."""
+    path = out / "row.json"
+    if not path.is_file():
+        return None
+    row = json.loads(path.read_text())
+    same = row.get("settings") == {"seconds": seconds, "k": k, "confusion_k": ck, "seed": seed}
+    return row if same and row.get("checkpoint") == name and row.get("samples") == samples else None
 
+
+def evaluate_checkpoint(
+    run_dir: Path, name: str, samples: int, seconds: float, k: int, ck: int, seed: int, out: Path
+) -> dict:
+    """No-fall and Fig 6.8 diagonal per skill of one checkpoint (reused from out/row.json when the
+    settings match)."""
+    from charctl.experiments.cgail.evaluate import eval_confusion, eval_survival, load_eval_run
+    from charctl.runs import atomic_write_text, strict_json
+
+    if (row := cached_row(out, name, samples, seconds, k, ck, seed)) is not None:
+        return row
     out.mkdir(parents=True, exist_ok=True)
     tr = load_eval_run(run_dir, "cpu", name)
     surv = eval_survival([tr], k, seconds, out, seed=seed)
     conf = eval_confusion(tr, ck, out, seed=seed + 1)
     no_fall = {s: row[f"{tr.label} no-fall"] for s, row in surv["table"].items()}
     diagonal = dict(zip(conf["skills"], conf["policy_diagonal"]))
-    return {
+    row = {
         "checkpoint": name,
         "samples": int(tr.agent.samples),
         "no_fall": no_fall,
@@ -67,7 +87,10 @@ def evaluate_checkpoint(run_dir: Path, name: str, seconds: float, k: int, ck: in
         "worst_no_fall": min(no_fall.values()),
         "min_diagonal": min(diagonal.values()),
         "seed": seed,
+        "settings": {"seconds": seconds, "k": k, "confusion_k": ck, "seed": seed},
     }
+    atomic_write_text(out / "row.json", strict_json(row))
+    return row
 
 
 def write_report(run_dir: Path, rows: list[dict], chosen: dict | None, confirm: dict | None, a) -> None:
@@ -142,7 +165,7 @@ def main() -> None:
             print(f"--- {name} ({n:,} samples)", flush=True)
             rows.append(
                 evaluate_checkpoint(
-                    a.run_dir, name, a.seconds, a.k, a.confusion_k, a.seed, a.run_dir / "eval" / Path(name).stem
+                    a.run_dir, name, n, a.seconds, a.k, a.confusion_k, a.seed, a.run_dir / "eval" / Path(name).stem
                 )
             )
         scores = [margin(r["worst_no_fall"], r["min_diagonal"], a.min_no_fall, a.min_diagonal) for r in rows]
@@ -150,6 +173,7 @@ def main() -> None:
         confirm = evaluate_checkpoint(
             a.run_dir,
             chosen["checkpoint"],
+            chosen["samples"],
             a.seconds,
             a.k,
             a.confusion_k,

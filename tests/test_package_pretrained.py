@@ -89,3 +89,8 @@ def test_eval_checkpoints_picks_by_margin_and_lists_every_kept_checkpoint(smoke_
     assert [r["samples"] for r in report["rows"]] == [1024]
     assert report["chosen"]["checkpoint"] == "samples_000001024.pt" and report["confirm"]["seed"] == 7
     assert (src / "eval" / "checkpoints.png").is_file() and (src / "eval" / "checkpoints.md").is_file()
+    survival = src / "eval" / "samples_000001024" / "survival.json"
+    before = survival.stat().st_mtime_ns
+    mod.main()  # same settings: the kept result is reused, nothing is evaluated again
+    assert survival.stat().st_mtime_ns == before
+    assert json.loads((src / "eval" / "checkpoints.json").read_text())["rows"] == report["rows"]
