@@ -288,6 +288,25 @@ def latest_run(output_root: str | Path, experiment: str, require_checkpoint: boo
 
 
 # ---------------------------------------------------------------------------- checkpoint files
+KEPT_CHECKPOINT = re.compile(r"samples_(\d+)\.pt")  # checkpoints kept every N samples beside last.pt
+
+
+def kept_checkpoint_name(samples: int) -> str:
+    """File name of a checkpoint kept at `samples` samples: samples_000123456.pt (sorts by sample count)."""
+    return f"samples_{samples:09d}.pt"
+
+
+def checkpoint_file_name(name: str | None) -> str:
+    """The file in RUN/checkpoints/ a user names (a plain file name such as samples_020000000.pt), or last.pt."""
+    if not name:
+        return "last.pt"
+    if Path(name).name != name or name in (".", ".."):
+        raise CharctlError(
+            f"--checkpoint takes a file name inside RUN/checkpoints/ (e.g. samples_020000000.pt), got {name!r}"
+        )
+    return name
+
+
 def save_checkpoint(
     path: Path, experiment: str, state: dict, signature: dict | None = None, tb_step: int | None = None
 ) -> Path:

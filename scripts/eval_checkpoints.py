@@ -23,7 +23,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import re
 from pathlib import Path
 
 import numpy as np
@@ -32,11 +31,11 @@ import torch
 
 def kept_checkpoints(run_dir: Path) -> list[tuple[int, str]]:
     """(samples, file name) of RUN/checkpoints/samples_*.pt and last.pt, by sample count."""
-    from charctl.runs import load_checkpoint
+    from charctl.runs import KEPT_CHECKPOINT, load_checkpoint
 
     found = []
     for p in sorted((run_dir / "checkpoints").glob("samples_*.pt")):
-        m = re.fullmatch(r"samples_(\d+)\.pt", p.name)
+        m = KEPT_CHECKPOINT.fullmatch(p.name)
         if m:
             found.append((int(m.group(1)), p.name))
     last = run_dir / "checkpoints" / "last.pt"

@@ -63,10 +63,14 @@ def main() -> None:
 
     import torch
 
-    from charctl.runs import run_experiment
+    from charctl.errors import CharctlError
+    from charctl.runs import checkpoint_file_name, run_experiment
 
     experiment = run_experiment(a.run_dir)
-    source = a.run_dir / "checkpoints" / Path(a.checkpoint).name
+    try:
+        source = a.run_dir / "checkpoints" / checkpoint_file_name(a.checkpoint)
+    except CharctlError as exc:
+        raise SystemExit(f"error: {exc}") from None
     if not source.is_file():
         raise SystemExit(f"error: checkpoint not found: {source}")
     payload = torch.load(source, map_location="cpu", weights_only=True)

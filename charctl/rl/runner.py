@@ -161,15 +161,10 @@ def crossed_multiple(samples: int, step: int, every: int) -> bool:
     return every > 0 and samples // every > (samples - step) // every
 
 
-def kept_checkpoint_name(samples: int) -> str:
-    """File name of a kept checkpoint: samples_000123456.pt (sorts by sample count)."""
-    return f"samples_{samples:09d}.pt"
-
-
 def run_on_policy(learner: Learner, run, settings: RunnerSettings) -> dict:
     """Train `learner` until `settings.total_samples`, writing into `run` (charctl.runs.Run)."""
     from charctl.progress import TrainingProgress
-    from charctl.runs import StopFlag
+    from charctl.runs import StopFlag, kept_checkpoint_name
 
     if run.resumed:
         state = run.load_checkpoint(learner.signature())
@@ -202,14 +197,13 @@ def run_on_policy(learner: Learner, run, settings: RunnerSettings) -> dict:
             if blowups.active:
                 fields["BLOWUPS"] = f"{100 * blowups.rate:.1f}%"
             bar.update(learner.samples_per_iteration, **fields)
-            if learner.iteration % settings.checkpoint_every == 0 or stop.requested:
-                run.save_checkpoint(with_rng_states(learner.state_dict()), learner.signature())
+            names = ["last.pt"] if learner.iteration % settings.checkpoint_every == 0 or stop.requested else []
             if crossed_multiple(learner.samples, learner.samples_per_iteration, settings.keep_every):
-                run.save_checkpoint(
-                    with_rng_states(learner.state_dict()),
-                    learner.signature(),
-                    name=kept_checkpoint_name(learner.samples),
-                )
+                names.append(kept_checkpoint_name(learner.samples))
+            if names:
+                state = with_rng_states(learner.state_dict())  # built once for both files
+                for name in names:
+                    run.save_checkpoint(state, learner.signature(), name=name)
             if stop.requested:
                 break
     if stop.requested:

@@ -28,11 +28,11 @@ from charctl.eval.dtw import dtw_align
 from charctl.eval.pose import pose_error_matrix
 from charctl.experiments.cgail.policy import (
     TrainedRun,
-    checkpoint_name,
     load_trained_run,
     local_joint_rotations,
     resolve_run_dirs,
 )
+from charctl.runs import checkpoint_file_name
 
 EVAL_OVERRIDES = ("output_root", "device")  # the only key=value overrides `charctl eval cgail` takes
 
@@ -498,7 +498,9 @@ def evaluate(targets: list[str], options: dict, overrides: list[str]) -> None:
     device, overrides = split_eval_overrides(overrides)
     run_dirs = resolve_run_dirs(targets, overrides, "eval")
     checkpoint = options.get("checkpoint")
-    default_out = run_dirs[0] / "eval" / Path(checkpoint_name(checkpoint)).stem if checkpoint else run_dirs[0] / "eval"
+    default_out = (
+        run_dirs[0] / "eval" / Path(checkpoint_file_name(checkpoint)).stem if checkpoint else run_dirs[0] / "eval"
+    )
     out = Path(options.get("out") or default_out)
     out.mkdir(parents=True, exist_ok=True)
     _append_report(

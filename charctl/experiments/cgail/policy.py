@@ -59,22 +59,11 @@ class TrainedRun:
         return self.agent.model.mean_action(obs, cond).numpy().astype(np.float64)
 
 
-def checkpoint_name(name: str | None) -> str:
-    """The file in RUN/checkpoints/ to load: `name` (e.g. samples_020000000.pt, a file name only), or last.pt."""
-    if not name:
-        return "last.pt"
-    if Path(name).name != name or name in (".", ".."):
-        raise CharctlError(
-            f"--checkpoint takes a file name inside RUN/checkpoints/ (e.g. samples_020000000.pt), got {name!r}"
-        )
-    return name
-
-
 def load_trained_run(run_dir: str | Path, checkpoint: str | None = None) -> TrainedRun:
     """Rebuild the agent of a cgail run directory and load a checkpoint of RUN/checkpoints/ (weights_only):
     `checkpoint` (a file name, e.g. samples_020000000.pt from train.keep_checkpoint_every) or last.pt."""
     from charctl.experiments.cgail.config import Config
-    from charctl.runs import open_run, run_experiment
+    from charctl.runs import checkpoint_file_name, open_run, run_experiment
 
     run_dir = Path(run_dir)
     exp = run_experiment(run_dir)
@@ -83,7 +72,7 @@ def load_trained_run(run_dir: str | Path, checkpoint: str | None = None) -> Trai
     run = open_run(run_dir, Config)
     torch.set_num_threads(max(1, int(run.cfg.train.torch_threads)))
     agent = build_agent(run.cfg)
-    load_agent_state(agent, run.load_checkpoint(agent.signature(), name=checkpoint_name(checkpoint)))
+    load_agent_state(agent, run.load_checkpoint(agent.signature(), name=checkpoint_file_name(checkpoint)))
     agent.model.eval()
     agent.disc.eval()
     return TrainedRun(run_dir, run.cfg, agent)
