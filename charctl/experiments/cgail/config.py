@@ -98,6 +98,9 @@ class DiscConfig:
     logit_reg: float = 0.0  # weight of sum(w^2) of the style head's weights (AMP: 0.01-0.05)
     weight_decay: float = 0.0  # weight of sum(w^2) of every disc weight (AMP: 1e-4 - 5e-4)
     class_lr: float = 0.0  # Adam lr of the class head; 0 = the same as `lr`
+    # Learned temperature of the class logits (exp(s), s trained at class_lr): spectral norm caps how confident
+    # the classifier can get; false = the paper's plain spectral-normalised head. docs/cgail.md, "Ten skills".
+    learn_class_scale: bool = False
     demo_oversample: int = 1  # demonstration pairs at clip times on a 1/(control_hz*k) grid; 1 = frames only
 
 

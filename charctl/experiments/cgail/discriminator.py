@@ -1,7 +1,10 @@
 """Conditional discriminator (style head D and class head C), its losses and the rewards.
 
 Input φ = (o_t, o_t+1), normalised with statistics of the demonstration data (frozen).
-All layers spectral-normalised (paper §5.3). Losses (eq 4.2-4.6):
+All layers spectral-normalised (paper §5.3). Spectral norm also bounds the class logits, and with them
+how confident the classifier can become; `learn_class_scale` multiplies the class logits by a learned
+temperature exp(s) (s starts at 0, trained with the class head) so that cross-entropy sets the confidence.
+Losses (eq 4.2-4.6):
     L_style = E_M[(D - 1)^2] + E_pi[(D + 1)^2]
     L_class = CE(C(φ_M), clip label) + CE(C(φ_pi), c̄)       (soft target c̄ during transitions)
               or, with class_loss="ls", sum ||c̄ - softmax C||^2  (eq 6.2 ablation)
@@ -23,7 +26,13 @@ SN = nn.utils.parametrizations.spectral_norm
 
 class Discriminator(nn.Module):
     def __init__(
-        self, pair_dim: int, num_classes: int, hidden: list[int], conditional: bool = True, activation: str = "relu"
+        self,
+        pair_dim: int,
+        num_classes: int,
+        hidden: list[int],
+        conditional: bool = True,
+        activation: str = "relu",
+        learn_class_scale: bool = False,
     ):
         super().__init__()
         self.norm = RunningNorm(pair_dim, clip=10.0)
@@ -36,6 +45,8 @@ class Discriminator(nn.Module):
         self.style_head = SN(nn.Linear(d, 1))
         self.conditional = conditional
         self.class_head = SN(nn.Linear(d, num_classes)) if conditional else None
+        # log of the class logits' temperature; a parameter only when learned (older checkpoints load unchanged)
+        self.class_log_scale = nn.Parameter(torch.zeros(())) if conditional and learn_class_scale else None
         self.num_classes = num_classes
 
     def forward(self, pairs: torch.Tensor, normalized: bool = False) -> tuple[torch.Tensor, torch.Tensor | None]:
@@ -43,7 +54,12 @@ class Discriminator(nn.Module):
         x = pairs if normalized else self.norm(pairs)
         h = self.trunk(x)
         d = self.style_head(h).squeeze(-1)
-        return d, (self.class_head(h) if self.class_head is not None else None)
+        if self.class_head is None:
+            return d, None
+        logits = self.class_head(h)
+        if self.class_log_scale is not None:
+            logits = logits * self.class_log_scale.exp()
+        return d, logits
 
 
 def style_loss(d_data: torch.Tensor, d_policy: torch.Tensor, kind: str = "lsgan") -> torch.Tensor:

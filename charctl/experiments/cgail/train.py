@@ -89,7 +89,13 @@ def build_agent(cfg, device: str = "cpu") -> Agent:
     model = ActorCritic(state_dim, 28, cfg.ppo, cond_dim=K if conditional else 0).to(device)
     gen = torch.Generator().manual_seed(cfg.seed)
     ppo = PPO(model, cfg.ppo, generator=gen)
-    disc = Discriminator(2 * DISC_OBS_DIM, K, list(cfg.disc.hidden), conditional=conditional)
+    disc = Discriminator(
+        2 * DISC_OBS_DIM,
+        K,
+        list(cfg.disc.hidden),
+        conditional=conditional,
+        learn_class_scale=cfg.disc.learn_class_scale,
+    )
     demos = DemoPairs(skills)
     pairs, _ = demos.all()
     with torch.no_grad():
@@ -105,9 +111,14 @@ def build_agent(cfg, device: str = "cpu") -> Agent:
 
 
 def discriminator_param_groups(disc: Discriminator, dcfg) -> list[dict]:
-    """Adam parameter groups: the class head at `class_lr` (when set), everything else at `lr`."""
-    head = [p for n, p in disc.named_parameters() if n.startswith("class_head.")]
-    rest = [p for n, p in disc.named_parameters() if not n.startswith("class_head.")]
+    """Adam parameter groups: the class head (and its learned temperature) at `class_lr` (when set),
+    everything else at `lr`."""
+
+    def in_class_head(name: str) -> bool:
+        return name.startswith("class_head.") or name == "class_log_scale"
+
+    head = [p for n, p in disc.named_parameters() if in_class_head(n)]
+    rest = [p for n, p in disc.named_parameters() if not in_class_head(n)]
     groups = [{"params": rest, "lr": dcfg.lr}]
     if head:
         groups.append({"params": head, "lr": dcfg.class_lr if dcfg.class_lr > 0 else dcfg.lr})
@@ -376,6 +387,10 @@ def update_discriminator(agent: Agent, ro: Rollout, rng: np.random.Generator) ->
             if agent.conditional:
                 hit = (c_data.argmax(-1) == labels).float()
                 step_stats["train/class_acc_data"] = float(hit.mean())
+                # mean probability of the clip's own label on data pairs: the data-side Fig 6.8 diagonal
+                step_stats["train/class_prob_data"] = float(c_data.softmax(-1).gather(-1, labels[:, None]).mean())
+                if agent.disc.class_log_scale is not None:
+                    step_stats["train/class_scale"] = float(agent.disc.class_log_scale.exp())
                 for k, sk in enumerate(agent.skills):
                     m = labels == k
                     if m.any():
