@@ -74,6 +74,38 @@ def test_spectral_norm_on_every_discriminator_layer():
     assert amp.class_head is None
 
 
+def test_learned_class_scale_multiplies_logits_and_grows_when_right():
+    from types import SimpleNamespace
+
+    from charctl.experiments.cgail.train import discriminator_param_groups
+
+    torch.manual_seed(0)
+    plain = Discriminator(4, 2, [8])
+    scaled = Discriminator(4, 2, [8], learn_class_scale=True)
+    scaled.load_state_dict({**plain.state_dict(), "class_log_scale": torch.tensor(np.log(3.0))})
+    plain.eval(), scaled.eval()  # spectral norm: no power iteration, so both use the same weight
+    x = torch.randn(5, 4)
+    with torch.no_grad():
+        d0, c0 = plain(x, normalized=True)
+        d1, c1 = scaled(x, normalized=True)
+    assert torch.allclose(d0, d1)  # the style head is untouched
+    assert torch.allclose(c1, 3.0 * c0, atol=1e-6)
+    assert "class_log_scale" not in plain.state_dict()  # the paper's head: older checkpoints load unchanged
+    # the temperature trains with the class head, at class_lr
+    groups = discriminator_param_groups(scaled, SimpleNamespace(lr=1e-5, class_lr=1e-3))
+    head_group = next(g for g in groups if g["lr"] == 1e-3)
+    assert any(p is scaled.class_log_scale for p in head_group["params"])
+    assert not any(p is scaled.class_log_scale for g in groups if g["lr"] == 1e-5 for p in g["params"])
+    # cross-entropy on correctly classified samples pushes the temperature up (more confidence):
+    # d CE / d s = -(logit margin weighted by the errors), negative when every argmax is right
+    scaled.train()
+    labels = c0.argmax(-1)
+    _, c = scaled(x, normalized=True)
+    loss = class_loss(c, torch.nn.functional.one_hot(labels, 2).float())
+    (g,) = torch.autograd.grad(loss, scaled.class_log_scale)
+    assert g.item() < 0
+
+
 def test_transition_ramp_blend():
     from omegaconf import OmegaConf
 
