@@ -110,22 +110,18 @@ def tune(
 ) -> None:
     """Hyper-parameter search on Ray Tune with ASHA early stopping: `charctl tune EXP key=loguniform(1e-5,1e-3)`."""
     from charctl.commands.tune import TuneOptions, tune_command
+    from charctl.launch.tune import SearchSettings
 
-    tune_command(
-        experiment,
-        list(overrides or []),
-        TuneOptions(
-            metric=metric,
-            mode=mode,
-            trials=trials,
-            address=address,
-            cpus=cpus_per_trial,
-            gpus=gpus_per_trial,
-            grace_period=grace_period,
-            max_reports=max_reports,
-            seed=seed,
-        ),
+    settings = SearchSettings(
+        trials=trials,
+        address=address,
+        cpus=cpus_per_trial,
+        gpus=gpus_per_trial,
+        grace_period=grace_period,
+        max_reports=max_reports,
+        seed=seed,
     )
+    tune_command(experiment, list(overrides or []), TuneOptions(metric=metric, mode=mode, settings=settings))
 
 
 # ---------------------------------------------------------------------------- eval / export

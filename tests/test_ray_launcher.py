@@ -256,12 +256,13 @@ def test_tune_four_smoke_trials_write_tables_plot_and_best_yaml(ray_cluster, tmp
     import yaml
 
     from charctl.commands.tune import TuneOptions, tune_command
+    from charctl.launch.tune import SearchSettings
 
     out = tune_command(
         "hopper-ga",
         ["scale=smoke", "ga.mutpb=range(0.1,0.9)", "ga.mut_eta=loguniform(2,50)", "ga.tournament=choice(2,3)"]
         + [f"output_root={tmp_path}"],
-        TuneOptions(trials=4),
+        TuneOptions(settings=SearchSettings(trials=4)),
     )
     assert out.parent == tmp_path / "tune" / "hopper-ga"
     trials = json.loads((out / "trials.json").read_text())

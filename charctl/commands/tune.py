@@ -8,27 +8,22 @@ one-line error, not N failed trials). The search itself is charctl.launch.tune.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 from charctl.errors import CharctlError
+from charctl.launch.tune import SearchSettings
 
 MODES = ("max", "min")
 
 
 @dataclass(frozen=True)
 class TuneOptions:
-    """The command-line options of `charctl tune`."""
+    """The command-line options of `charctl tune`: the metric and the search's settings."""
 
     metric: str | None = None
     mode: str | None = None
-    trials: int = 8
-    address: str | None = None
-    cpus: float = 1.0
-    gpus: float = 0.0
-    grace_period: int = 1
-    max_reports: int | None = None
-    seed: int = 0
+    settings: SearchSettings = SearchSettings()
 
 
 def resolve_metric(experiment: str, declared: dict[str, str], metric: str | None, mode: str | None) -> tuple[str, str]:
@@ -50,6 +45,7 @@ def resolve_metric(experiment: str, declared: dict[str, str], metric: str | None
 
 
 def check_options(opts: TuneOptions) -> None:
+    opts = opts.settings
     if opts.trials < 1:
         raise CharctlError(f"--trials must be >= 1, got {opts.trials}")
     if not opts.cpus > 0:
@@ -105,15 +101,9 @@ def tune_command(experiment: str, overrides: list[str], opts: TuneOptions) -> Pa
         dims=tuple(dims),
         metric=metric,
         mode=mode,
-        trials=opts.trials,
         out_dir=str(out),
+        settings=replace(opts.settings, address=opts.settings.address or None),
         report_keys=tuple(k for k in exp.tune_metrics if k != metric),
-        address=opts.address or None,
-        cpus=opts.cpus,
-        gpus=opts.gpus,
-        grace_period=opts.grace_period,
-        max_reports=opts.max_reports,
-        seed=opts.seed,
         cwd=os.getcwd(),
     )
     records, best = run_tune(setup)

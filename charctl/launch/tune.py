@@ -50,6 +50,19 @@ BIG_T = 10**9  # ASHA's max_t when --max-reports is not given: trials end on the
 
 
 @dataclass(frozen=True)
+class SearchSettings:
+    """The search's size and resources (the `charctl tune` options besides the metric)."""
+
+    trials: int = 8
+    address: str | None = None  # Ray cluster address; None = a local Ray
+    cpus: float = 1.0  # per trial
+    gpus: float = 0.0  # per trial
+    grace_period: int = 1  # ASHA: reports a trial makes before it can be stopped
+    max_reports: int | None = None  # ASHA max_t; None = trials end on their own
+    seed: int = 0  # of the random search
+
+
+@dataclass(frozen=True)
 class TuneSetup:
     """Everything a search needs (sent to every trial through the object store)."""
 
@@ -58,15 +71,9 @@ class TuneSetup:
     dims: tuple[Dim, ...]
     metric: str
     mode: str  # max | min
-    trials: int
     out_dir: str  # absolute
+    settings: SearchSettings = SearchSettings()
     report_keys: tuple[str, ...] = ()  # further scalars copied into each result (the declared metrics)
-    address: str | None = None
-    cpus: float = 1.0
-    gpus: float = 0.0
-    grace_period: int = 1
-    max_reports: int | None = None
-    seed: int = 0
     cwd: str = ""
 
     def overrides(self, config: dict) -> list[str]:
@@ -115,7 +122,7 @@ def trial_class():
                 setup.experiment,
                 tuple(setup.overrides(config)),
                 cwd=setup.cwd,
-                threads=max(1, int(setup.cpus)),
+                threads=max(1, int(setup.settings.cpus)),
                 env={"CHARCTL_METRICS_STREAM": str(self.stream)},
             )
             self.job = ChildJob(job, log_dir=trial_log_dir(setup, self.trial_id))
@@ -338,19 +345,20 @@ def run_tune(setup: TuneSetup) -> tuple[list[TrialRecord], TrialRecord | None]:
     from ray.tune.search.basic_variant import BasicVariantGenerator
 
     out = Path(setup.out_dir)
-    labels = ["(not sampled yet)"] * setup.trials
+    labels = ["(not sampled yet)"] * setup.settings.trials
     stop = _StopRequest()
-    with ray_session(setup.address, "charctl tune") as ray:
+    with ray_session(setup.settings.address, "charctl tune") as ray:
         print(
-            f"tune {setup.experiment}: {setup.trials} trial(s), {setup.metric} ({setup.mode}), ASHA; "
-            f"Ray: {cluster_summary(ray)}; {setup.cpus:g} CPU per trial -> {out}"
+            f"tune {setup.experiment}: {setup.settings.trials} trial(s), {setup.metric} ({setup.mode}), ASHA; "
+            f"Ray: {cluster_summary(ray)}; {setup.settings.cpus:g} CPU per trial -> {out}"
         )
         os.environ.setdefault("RAY_AIR_NEW_OUTPUT", "0")  # Tune's own progress tables off (verbose=0): ours instead
         columns = (setup.metric, "reports")
         with JobTable(f"tune {setup.experiment}", labels, extra_columns=columns, final_table=False) as table:
             view = _View(setup, table, stop)
             trainable = tune.with_resources(
-                tune.with_parameters(trial_class(), setup=setup), {"cpu": setup.cpus, "gpu": setup.gpus}
+                tune.with_parameters(trial_class(), setup=setup),
+                {"cpu": setup.settings.cpus, "gpu": setup.settings.gpus},
             )
             tuner = tune.Tuner(
                 trainable,
@@ -358,11 +366,13 @@ def run_tune(setup: TuneSetup) -> tuple[list[TrialRecord], TrialRecord | None]:
                 tune_config=tune.TuneConfig(
                     metric=setup.metric,
                     mode=setup.mode,
-                    num_samples=setup.trials,
+                    num_samples=setup.settings.trials,
                     scheduler=ASHAScheduler(
-                        max_t=setup.max_reports or BIG_T, grace_period=setup.grace_period, reduction_factor=4
+                        max_t=setup.settings.max_reports or BIG_T,
+                        grace_period=setup.settings.grace_period,
+                        reduction_factor=4,
                     ),
-                    search_alg=BasicVariantGenerator(random_state=setup.seed),
+                    search_alg=BasicVariantGenerator(random_state=setup.settings.seed),
                     trial_dirname_creator=_trial_dirname,
                 ),
                 run_config=tune.RunConfig(
@@ -505,7 +515,7 @@ def write_best(setup: TuneSetup, best: TrialRecord, path: Path) -> None:
             mapping[key] = value
     command = f"charctl train {setup.experiment} " + " ".join(_shell_quote(o) for o in overrides)
     header = (
-        f"# best of {setup.trials} trial(s) of `charctl tune {setup.experiment}`: {setup.metric} = "
+        f"# best of {setup.settings.trials} trial(s) of `charctl tune {setup.experiment}`: {setup.metric} = "
         f"{best.metric:.6g} ({setup.mode}); run {best.run_dir}\n"
         f"# run it again with these overrides:\n#   {command.strip()}\n"
     )
