@@ -8,12 +8,17 @@ CGAIL_300HZ := env.physics_hz=300 env.armature=0.01
 # hardware has it (ppo.update_precision=auto): reproduce them with their fp32 update.
 CGAIL_FP32 := ppo.update_precision=fp32
 
-.PHONY: repro-cgail-small repro-cgail-10skill repro-cgail-paper demo-cgail
+.PHONY: repro-cgail-small repro-cgail-10skill repro-cgail-10skill-temperature repro-cgail-paper demo-cgail
 
 repro-cgail-10skill: install ## cgail: the shipped ten-skill run (pretrained/README.md; ~2.3 h on 2 cores), every kept checkpoint evaluated, one picked
 	$(CHARCTL) train cgail scale=small "use_skills=[]" reward.class_form=logratio env.skill_fall_weight=0.5 train.total_samples=50000000 train.checkpoint_every=20 train.keep_checkpoint_every=2500000 seed=1 output_root=$(CGAIL_SMALL)/ten
 	C=$$(ls -d $(CGAIL_SMALL)/ten/cgail/*/ | tail -1); \
 	$(VENV)/bin/python scripts/eval_checkpoints.py $$C --after 10000000
+
+repro-cgail-10skill-temperature: install ## cgail: the third ten-skill run, with a learned class temperature (pretrained/cgail-10skill-temperature; ~2 h on 2 cores), every kept checkpoint evaluated
+	$(CHARCTL) train cgail scale=small "use_skills=[]" reward.class_form=logratio env.skill_fall_weight=0.5 disc.learn_class_scale=true train.total_samples=45000000 train.checkpoint_every=20 train.keep_checkpoint_every=2500000 seed=1 output_root=$(CGAIL_SMALL)/ten-temperature
+	C=$$(ls -d $(CGAIL_SMALL)/ten-temperature/cgail/*/ | tail -1); \
+	$(VENV)/bin/python scripts/eval_checkpoints.py $$C --after 15000000
 
 repro-cgail-small: install ## cgail: the shipped policies' runs (pretrained/README.md: cGAIL 3 skills, AMP and tracking walk; ~3 h on 2 cores), evaluated
 	$(CHARCTL) train cgail scale=small train.total_samples=8000000 $(CGAIL_300HZ) $(CGAIL_FP32) seed=1 output_root=$(CGAIL_SMALL)/cgail
