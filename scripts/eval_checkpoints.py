@@ -59,7 +59,9 @@ def cached_row(out: Path, name: str, samples: int, seconds: float, k: int, ck: i
         return None
     row = json.loads(path.read_text())
     same = row.get("settings") == {"seconds": seconds, "k": k, "confusion_k": ck, "seed": seed}
-    return row if same and row.get("checkpoint") == name and row.get("samples") == samples else None
+    # a row written before the argmax accuracy was recorded is evaluated again
+    current = same and "class_acc" in row
+    return row if current and row.get("checkpoint") == name and row.get("samples") == samples else None
 
 
 def evaluate_checkpoint(
@@ -71,10 +73,6 @@ def evaluate_checkpoint(
     from charctl.runs import atomic_write_text, strict_json
 
     if (row := cached_row(out, name, samples, seconds, k, ck, seed)) is not None:
-        if "class_acc" not in row:  # rows written before the argmax accuracy was recorded
-            table = json.loads((out / "survival.json").read_text())["table"]
-            row["class_acc"] = {s: v for s, r in table.items() for c, v in r.items() if c.endswith("class acc")}
-            row["min_class_acc"] = min(row["class_acc"].values())
         return row
     out.mkdir(parents=True, exist_ok=True)
     tr = load_eval_run(run_dir, "cpu", name)

@@ -44,18 +44,20 @@ def resolve_metric(experiment: str, declared: dict[str, str], metric: str | None
     return metric, mode
 
 
-def check_options(opts: TuneOptions) -> None:
-    opts = opts.settings
-    if opts.trials < 1:
-        raise CharctlError(f"--trials must be >= 1, got {opts.trials}")
-    if not opts.cpus > 0:
-        raise CharctlError(f"--cpus-per-trial must be > 0, got {opts.cpus:g}")
-    if opts.gpus < 0:
-        raise CharctlError(f"--gpus-per-trial must be >= 0, got {opts.gpus:g}")
-    if opts.grace_period < 1:
-        raise CharctlError(f"--grace-period must be >= 1, got {opts.grace_period}")
-    if opts.max_reports is not None and opts.max_reports < opts.grace_period:
-        raise CharctlError(f"--max-reports must be >= --grace-period ({opts.grace_period}), got {opts.max_reports}")
+def check_settings(settings: SearchSettings) -> None:
+    """One-line errors for search settings out of range (before Ray starts)."""
+    if settings.trials < 1:
+        raise CharctlError(f"--trials must be >= 1, got {settings.trials}")
+    if not settings.cpus > 0:
+        raise CharctlError(f"--cpus-per-trial must be > 0, got {settings.cpus:g}")
+    if settings.gpus < 0:
+        raise CharctlError(f"--gpus-per-trial must be >= 0, got {settings.gpus:g}")
+    if settings.grace_period < 1:
+        raise CharctlError(f"--grace-period must be >= 1, got {settings.grace_period}")
+    if settings.max_reports is not None and settings.max_reports < settings.grace_period:
+        raise CharctlError(
+            f"--max-reports must be >= --grace-period ({settings.grace_period}), got {settings.max_reports}"
+        )
 
 
 def validate_space(experiment: str, fixed: list[str], dims, schema: type):
@@ -84,7 +86,7 @@ def tune_command(experiment: str, overrides: list[str], opts: TuneOptions) -> Pa
 
     check_experiment(experiment)
     exp = load(experiment)
-    check_options(opts)
+    check_settings(opts.settings)
     fixed, dims = parse_overrides(overrides)
     if not dims:
         raise CharctlError(
