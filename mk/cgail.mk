@@ -7,8 +7,10 @@ CGAIL_300HZ := env.physics_hz=300 env.armature=0.01
 # All four shipped policies were trained before the small preset's PPO update moved to bf16 where the
 # hardware has it (ppo.update_precision=auto): reproduce them with their fp32 update.
 CGAIL_FP32 := ppo.update_precision=fp32
+# The settings repro-cgail-small trains with; repro-cgail-current empties it to train at the current preset.
+CGAIL_SHIPPED := $(CGAIL_300HZ) $(CGAIL_FP32)
 
-.PHONY: repro-cgail-small repro-cgail-10skill repro-cgail-10skill-temperature repro-cgail-paper demo-cgail
+.PHONY: repro-cgail-small repro-cgail-current repro-cgail-10skill repro-cgail-10skill-temperature repro-cgail-paper demo-cgail
 
 repro-cgail-10skill: install ## cgail: the shipped ten-skill run (pretrained/README.md; ~2.3 h on 2 cores), every kept checkpoint evaluated, one picked
 	$(CHARCTL) train cgail scale=small "use_skills=[]" reward.class_form=logratio env.skill_fall_weight=0.5 train.total_samples=50000000 train.checkpoint_every=20 train.keep_checkpoint_every=2500000 seed=1 output_root=$(CGAIL_SMALL)/ten
@@ -21,15 +23,18 @@ repro-cgail-10skill-temperature: install ## cgail: the third ten-skill run, with
 	$(VENV)/bin/python scripts/eval_checkpoints.py $$C --after 15000000
 
 repro-cgail-small: install ## cgail: the shipped policies' runs (pretrained/README.md: cGAIL 3 skills, AMP and tracking walk; ~3 h on 2 cores), evaluated
-	$(CHARCTL) train cgail scale=small train.total_samples=8000000 $(CGAIL_300HZ) $(CGAIL_FP32) seed=1 output_root=$(CGAIL_SMALL)/cgail
-	$(CHARCTL) train cgail scale=small use_skills=[walk] cgail.conditional=false train.total_samples=2000000 $(CGAIL_300HZ) $(CGAIL_FP32) seed=1 output_root=$(CGAIL_SMALL)/amp
-	$(CHARCTL) train cgail scale=small use_skills=[walk] cgail.conditional=false reward.kind=tracking train.total_samples=1500000 $(CGAIL_300HZ) $(CGAIL_FP32) seed=1 output_root=$(CGAIL_SMALL)/tracking
+	$(CHARCTL) train cgail scale=small train.total_samples=8000000 $(CGAIL_SHIPPED) seed=1 output_root=$(CGAIL_SMALL)/cgail
+	$(CHARCTL) train cgail scale=small use_skills=[walk] cgail.conditional=false train.total_samples=2000000 $(CGAIL_SHIPPED) seed=1 output_root=$(CGAIL_SMALL)/amp
+	$(CHARCTL) train cgail scale=small use_skills=[walk] cgail.conditional=false reward.kind=tracking train.total_samples=1500000 $(CGAIL_SHIPPED) seed=1 output_root=$(CGAIL_SMALL)/tracking
 	C=$$(ls -d $(CGAIL_SMALL)/cgail/cgail/*/ | tail -1); A=$$(ls -d $(CGAIL_SMALL)/amp/cgail/*/ | tail -1); \
 	T=$$(ls -d $(CGAIL_SMALL)/tracking/cgail/*/ | tail -1); \
 	rm -f $(CGAIL_SMALL)/report.md; \
 	$(CHARCTL) eval $$C --survival 5 --confusion --switch walk right_kick --curves -k 8 -o $(CGAIL_SMALL) && \
 	$(CHARCTL) eval $$C $$A $$T --survival 10 --dtw -k 8 -o $(CGAIL_SMALL)
 	@echo "report: $(CGAIL_SMALL)/report.md"
+
+repro-cgail-current: install ## cgail: repro-cgail-small's three runs at the current small preset (150 Hz physics, bf16 PPO update; docs/cgail.md "The current preset, re-run"; ~45 min on 2 cores), evaluated
+	$(MAKE) --no-print-directory repro-cgail-small CGAIL_SHIPPED= CGAIL_SMALL=outputs/repro/cgail-current
 
 repro-cgail-paper: install ## cgail: the paper's runs (10 skills, AMP, LS ablation, 1/3/6 skills); GPU/cluster scale
 	$(CHARCTL) train cgail scale=paper output_root=$(CGAIL_PAPER)/cgail

@@ -89,6 +89,11 @@ def test_every_eval_mode_writes_its_files(smoke_runs):
         assert np.allclose(np.sum(conf[key], axis=1), 1.0, atol=1e-5)  # rows sum to 1
     sw = json.loads((out / "switch_walk_to_right_kick.json").read_text())
     assert set(sw["summary"]) == {"ramp", "no_ramp"} and sw["summary"]["no_ramp"]["ramp_frames"] == 0
+    # both conditions are watched until 2 s (60 frames at 30 Hz) after the ramp has ended
+    ramp = sw["summary"]["ramp"]["ramp_frames"]
+    assert ramp > 0
+    for name in ("ramp", "no_ramp"):
+        assert len(sw["curves"][name]["probs"]) == sw["switch_frame"] + ramp + 60, name
     for f in (
         "dtw.csv",
         "confusion.png",

@@ -318,16 +318,23 @@ def eval_confusion(tr: DeviceRun, episodes: int, out: Path, seed: int = 99) -> d
 def eval_switch(
     tr: DeviceRun, a: str, b: str, trials: int, out: Path, before_s: float = 1.0, after_s: float = 2.0
 ) -> dict:
-    """Fig 6.10/6.11: command A -> B mid-episode with and without the ramp; latency and falls."""
+    """Fig 6.10/6.11: command A -> B mid-episode with and without the ramp; latency and falls.
+
+    Each trial runs `before_s` seconds of A, then the switch, then the ramp (in the ramp condition)
+    and `after_s` seconds more. Both conditions are watched over the same window, which ends
+    `after_s` after the ramp has finished, so a policy that follows the blended command and turns to
+    B near the end of the ramp is seen doing it."""
     if not tr.agent.conditional:
         raise CharctlError(f"{tr.run_dir} is an AMP run: it takes no command, so --switch does not apply")
     ka, kb = tr.skill_index(a), tr.skill_index(b)
     hz = tr.cfg.env.control_hz
-    t_switch, t_end = int(before_s * hz), int((before_s + after_s) * hz)
-    curves, summary = {}, {}
     ramp_frames = int(tr.cfg.env.ramp_frames) or 60
+    t_switch = int(before_s * hz)
+    t_end = t_switch + ramp_frames + int(after_s * hz)
+    episode_seconds = t_end / hz + 1.0
+    curves, summary = {}, {}
     for name, ramp in (("ramp", ramp_frames), ("no_ramp", 0)):
-        env = tr.make_env(trials, seed=7, switch_prob=0.0, ramp_frames=ramp, episode_seconds=before_s + after_s + 1)
+        env = tr.make_env(trials, seed=7, switch_prob=0.0, ramp_frames=ramp, episode_seconds=episode_seconds)
         env.forced_command = np.full(trials, ka)
         env.start_frame = 0
         env.random_yaw = False
@@ -409,7 +416,8 @@ def eval_switch(
         f"Fig 6.10/6.11 — command switch {a} → {b}",
         _markdown_table(rows, cols) + f"\n\n![switch](switch_{a}_to_{b}.png)",
         f"switch at frame {t_switch} ({before_s:.1f} s); ramp = {ramp_frames} frames linear "
-        f"(eq 4.10); latency = frames after the switch until the classifier's P({b}) > 0.5",
+        f"(eq 4.10); each trial watched until frame {t_end} ({after_s:.1f} s after the ramp ends); "
+        f"latency = frames after the switch until the classifier's P({b}) > 0.5",
     )
     return result
 
