@@ -26,6 +26,7 @@ import torch.nn.functional as F
 from charctl.errors import CharctlError
 from charctl.eval.dtw import dtw_align
 from charctl.eval.pose import pose_error_matrix
+from charctl.experiments.cgail.discriminator import blended_class_reward, style_reward
 from charctl.experiments.cgail.policy import (
     TrainedRun,
     load_trained_run,
@@ -143,7 +144,6 @@ def rollout_skill(tr: DeviceRun, skill: int, episodes: int, seconds: float, seed
         if not alive.any():
             break
     d, logits = tr.discriminate(np.concatenate(pairs))
-    from charctl.experiments.cgail.discriminator import style_reward
 
     probs = F.softmax(logits, -1).cpu().numpy() if logits is not None else None
     r_style = style_reward(d, tr.agent.cfg.disc.objective).cpu().numpy()
@@ -351,8 +351,6 @@ def eval_switch(
             res = env.step(tr.mean_action(env))
             d, logits = tr.discriminate(np.concatenate([o_t, res.pair_next], axis=1))
             p = F.softmax(logits, -1)
-            from charctl.experiments.cgail.discriminator import blended_class_reward, style_reward
-
             r_c = blended_class_reward(
                 p,
                 torch.from_numpy(cmd_a).to(tr.device),
