@@ -176,3 +176,57 @@ def test_auto_precision_follows_the_hardware(monkeypatch):
     assert [P.resolve_update_precision(c, cpu) for c in ("auto", "fp32", "bf16")] == ["bf16", "fp32", "bf16"]
     monkeypatch.setattr(P, "cpu_has_native_bf16", lambda: False)
     assert [P.resolve_update_precision(c, cpu) for c in ("auto", "fp32", "bf16")] == ["fp32", "fp32", "bf16"]
+
+
+def test_gaussian_kl_matches_torch_and_the_schedule_steps_by_hand():
+    """gaussian_kl equals torch.distributions' KL; the schedule divides by 1.5 above 2 x target,
+    multiplies by 1.5 below half of it, keeps the rate in between and within its bounds."""
+    from charctl.rl.ppo import adapted_lr, gaussian_kl
+
+    torch.manual_seed(3)
+    mp, mq = torch.randn(4, 3), torch.randn(4, 3)
+    sp, sq = 0.3 * torch.randn(3), 0.3 * torch.randn(3)
+    ref = torch.distributions.kl_divergence(
+        torch.distributions.Normal(mp, sp.exp()), torch.distributions.Normal(mq, sq.exp())
+    ).sum(-1)
+    assert torch.allclose(gaussian_kl(mp, sp, mq, sq), ref, rtol=1e-5)
+    # equal std: KL = |dm|^2 / (2 s^2); dm = 0.1 in one dim, s = 0.1 -> 0.5 nats
+    kl = gaussian_kl(
+        torch.tensor([0.1, 0.0]),
+        torch.log(torch.tensor([0.1, 0.1])),
+        torch.zeros(2),
+        torch.log(torch.tensor([0.1, 0.1])),
+    )
+    assert float(kl) == pytest.approx(0.5, rel=1e-6)
+    assert adapted_lr(3e-4, kl=0.05, desired_kl=0.02, lr_min=1e-6, lr_max=1e-3) == pytest.approx(2e-4)
+    assert adapted_lr(2e-4, kl=0.005, desired_kl=0.02, lr_min=1e-6, lr_max=1e-3) == pytest.approx(3e-4)
+    assert adapted_lr(2e-4, kl=0.02, desired_kl=0.02, lr_min=1e-6, lr_max=1e-3) == 2e-4
+    assert adapted_lr(1e-4, kl=0.0, desired_kl=0.02, lr_min=1e-6, lr_max=1e-4) == 1e-4
+    assert adapted_lr(1.2e-6, kl=1.0, desired_kl=0.02, lr_min=1e-6, lr_max=1e-4) == 1e-6
+
+
+def test_adaptive_lr_falls_when_the_update_overshoots_and_is_checked():
+    """A large fixed rate moves the policy far past a tiny KL target: the logged rate drops below the
+    configured one and never leaves its bounds; a fixed schedule reports the configured rate."""
+    from charctl.rl.config import check_ppo
+
+    def run(desired_kl: float) -> dict:
+        torch.manual_seed(1)
+        cfg = PPOConfig(hidden=[32, 32], action_std=0.1, lr=1e-2, epochs=2, minibatch_size=64, desired_kl=desired_kl)
+        cfg.lr_min, cfg.lr_max = 1e-4, 1e-2
+        model = ActorCritic(4, 2, cfg)
+        st = RolloutStorage(2, 128, 4, 2, 0)
+        for _ in range(2):
+            obs = torch.randn(128, 4)
+            a, logp, v = model.act(obs)
+            st.add(obs, None, a, logp, v, torch.randn(128), torch.zeros(128))
+        st.finish(torch.zeros(128), 0.99, 0.95)
+        return PPO(model, cfg).update(st)
+
+    assert run(0.0)["train/ppo_lr"] == 1e-2
+    lr = run(1e-4)["train/ppo_lr"]
+    assert 1e-4 <= lr < 1e-2 / 1.5
+    cfg = PPOConfig(desired_kl=-1.0)
+    assert "ppo.desired_kl must be >= 0" in check_ppo(cfg)
+    cfg = PPOConfig(desired_kl=0.01, lr_min=1e-3, lr_max=1e-4)
+    assert "0 < lr_min <= lr_max" in check_ppo(cfg)

@@ -30,6 +30,14 @@ class PPOConfig:
     # AVX512-BF16, a CUDA GPU with bf16; else fp32). bf16 made a PPO minibatch step 2.2x faster on this
     # project's Sapphire Rapids core pair; without native support it is slower. docs/cgail.md, "Throughput".
     update_precision: str = "fp32"
+    # KL-targeting learning rate (rsl_rl's "adaptive" schedule): > 0 measures, before each minibatch step,
+    # the mean KL(pi_old || pi_now) of the minibatch (nats, exact for the diagonal Gaussian) and divides
+    # the Adam learning rate by 1.5 when it exceeds 2 x desired_kl, multiplies it by 1.5 when it is below
+    # desired_kl / 2, within [lr_min, lr_max]. 0 keeps `lr` fixed. The rate is logged as train/ppo_lr and
+    # saved in the checkpoint's optimiser state, so a resume continues from it.
+    desired_kl: float = 0.0
+    lr_min: float = 1e-6  # lower bound of the adaptive learning rate
+    lr_max: float = 1e-3  # upper bound of the adaptive learning rate
 
 
 UPDATE_PRECISIONS = ("fp32", "bf16", "auto")
@@ -39,4 +47,8 @@ def check_ppo(ppo) -> str | None:
     """Choices of a PPO section that the schema's types cannot check; a one-line message or None."""
     if ppo.update_precision not in UPDATE_PRECISIONS:
         return f"ppo.update_precision must be one of {', '.join(UPDATE_PRECISIONS)}, got {ppo.update_precision!r}"
+    if ppo.desired_kl < 0:
+        return f"ppo.desired_kl must be >= 0 (0 keeps the learning rate fixed), got {ppo.desired_kl}"
+    if ppo.desired_kl > 0 and not 0 < ppo.lr_min <= ppo.lr_max:
+        return f"ppo.lr_min and ppo.lr_max must satisfy 0 < lr_min <= lr_max, got {ppo.lr_min} and {ppo.lr_max}"
     return None

@@ -82,6 +82,24 @@ def gaussian_entropy(log_std: torch.Tensor) -> torch.Tensor:
     return (0.5 + _LOG_SQRT_2PI + log_std).sum(-1)
 
 
+def gaussian_kl(mean_p: torch.Tensor, log_std_p: torch.Tensor, mean_q: torch.Tensor, log_std_q: torch.Tensor):
+    """KL(p || q) (nats) of two diagonal Gaussians, summed over the last axis:
+    sum(log sq - log sp + (sp^2 + (mp - mq)^2) / (2 sq^2) - 1/2)."""
+    var_ratio = torch.exp(2.0 * (log_std_p - log_std_q))
+    mahalanobis = (mean_p - mean_q).square() * torch.exp(-2.0 * log_std_q)
+    return (log_std_q - log_std_p + 0.5 * (var_ratio + mahalanobis) - 0.5).sum(-1)
+
+
+def adapted_lr(lr: float, kl: float, desired_kl: float, lr_min: float, lr_max: float) -> float:
+    """The next learning rate of the KL-targeting schedule: /1.5 above 2 x desired_kl, x1.5 below half of
+    it, unchanged in between; kept within [lr_min, lr_max]."""
+    if kl > 2.0 * desired_kl:
+        lr = lr / 1.5
+    elif kl < 0.5 * desired_kl:
+        lr = lr * 1.5
+    return min(max(lr, lr_min), lr_max)
+
+
 LOG_RATIO_LIMIT = 20.0  # |log pi_new - log pi_old| above this is clamped (exp(20) = 4.9e8, finite in float32)
 
 
@@ -170,9 +188,13 @@ class PPO:
         inputs = self.model.network_input(data["obs"], data["cond"] if self.model.cond_dim else None)
         low = {"fp32": None, "bf16": torch.bfloat16}[self.precision]
         old_logp = data["log_probs"]
-        if low is not None:  # the behaviour log-probs in the update's own precision: the ratio starts at 1
+        adaptive = cfg.desired_kl > 0
+        old_mean = old_log_std = None
+        if low is not None or adaptive:  # the behaviour policy in the update's own precision: ratio starts at 1
             with torch.no_grad():
-                old_logp = gaussian_log_prob(data["actions"], self.model.heads(inputs, low)[0], self.model.log_std)
+                old_mean, old_log_std = self.model.heads(inputs, low)[0], self.model.log_std.detach().clone()
+            if low is not None:
+                old_logp = gaussian_log_prob(data["actions"], old_mean, old_log_std)
         for _ in range(cfg.epochs):
             perm = torch.randperm(n, generator=self.generator).to(data["obs"].device)
             for start in range(0, n - mb + 1, mb):
@@ -183,6 +205,8 @@ class PPO:
                     adv = (adv - adv.mean()) / (adv.std() + 1e-8)
                 mean, values = self.model.heads(x, low)
                 new_logp = gaussian_log_prob(data["actions"][idx], mean, self.model.log_std)
+                if adaptive:
+                    self._adapt_lr(old_mean[idx], old_log_std, mean.detach(), self.model.log_std.detach())
                 losses = ppo_losses(
                     new_logp,
                     old_logp[idx],
@@ -202,7 +226,17 @@ class PPO:
                 for k, v in {**losses, "entropy": entropy}.items():
                     sums[k] = sums.get(k, 0.0) + v.detach().double()
                 steps += 1
-        return {f"losses/{k}": float(v) / max(steps, 1) for k, v in sums.items()}
+        stats = {f"losses/{k}": float(v) / max(steps, 1) for k, v in sums.items()}
+        stats["train/ppo_lr"] = self.optimizer.param_groups[0]["lr"]
+        return stats
+
+    def _adapt_lr(self, old_mean, old_log_std, mean, log_std) -> None:
+        """One step of the KL-targeting schedule on this minibatch (reads one number to the host)."""
+        cfg = self.cfg
+        kl = float(gaussian_kl(old_mean, old_log_std, mean, log_std).mean())
+        lr = adapted_lr(self.optimizer.param_groups[0]["lr"], kl, cfg.desired_kl, cfg.lr_min, cfg.lr_max)
+        for group in self.optimizer.param_groups:
+            group["lr"] = lr
 
     def state_dict(self) -> dict:
         return {"model": self.model.state_dict(), "optimizer": self.optimizer.state_dict()}
