@@ -103,6 +103,13 @@ def adapted_lr(lr: float, kl: float, desired_kl: float, lr_min: float, lr_max: f
 LOG_RATIO_LIMIT = 20.0  # |log pi_new - log pi_old| above this is clamped (exp(20) = 4.9e8, finite in float32)
 
 
+def behaviour_weights(proximal_logp: torch.Tensor, behaviour_logp: torch.Tensor) -> torch.Tensor:
+    """min(1, pi_prox / pi_behav) per sample: the importance weight of the decoupled PPO objective
+    (Hilton et al. 2021, "Batch size-invariance for policy optimization") for data collected by an
+    older behaviour policy, truncated at 1 as IMPALA's V-trace truncates rho (bounded variance)."""
+    return torch.exp(torch.clamp(proximal_logp - behaviour_logp, -LOG_RATIO_LIMIT, 0.0))
+
+
 def ppo_losses(
     new_logp: torch.Tensor,
     old_logp: torch.Tensor,
@@ -112,10 +119,12 @@ def ppo_losses(
     returns: torch.Tensor,
     clip: float,
     value_clip: float = 0.0,
+    weights: torch.Tensor | None = None,
 ) -> dict[str, torch.Tensor]:
     """Clipped surrogate and value losses (to minimise) and diagnostics.
 
-    L_pi = -E[min(rho A, clip(rho, 1-eps, 1+eps) A)], rho = exp(new_logp - old_logp);
+    L_pi = -E[w min(rho A, clip(rho, 1-eps, 1+eps) A)], rho = exp(new_logp - old_logp), w = 1 unless
+    `weights` are given (the decoupled objective's behaviour correction, see `behaviour_weights`);
     L_V = E[(V - R)^2] (or the max with the clipped version when value_clip > 0).
     """
     # The log-ratio is clamped before exp: one sample whose log-probability moved by > 88 nats within an
@@ -124,7 +133,7 @@ def ppo_losses(
     log_ratio = new_logp - old_logp
     ratio = torch.exp(torch.clamp(log_ratio, -LOG_RATIO_LIMIT, LOG_RATIO_LIMIT))
     surr = torch.min(ratio * advantages, torch.clamp(ratio, 1.0 - clip, 1.0 + clip) * advantages)
-    policy_loss = -surr.mean()
+    policy_loss = -(surr if weights is None else weights * surr).mean()
     if value_clip > 0:
         v_clipped = old_values + torch.clamp(values - old_values, -value_clip, value_clip)
         value_loss = torch.max((values - returns) ** 2, (v_clipped - returns) ** 2).mean()
@@ -177,7 +186,11 @@ class PPO:
         self.generator = generator
         self.precision = resolve_update_precision(cfg.update_precision, next(model.parameters()).device)
 
-    def update(self, storage: RolloutStorage) -> dict[str, float]:
+    def update(self, storage: RolloutStorage, stale_behaviour: bool = False) -> dict[str, float]:
+        """The minibatch epochs on `storage`. `stale_behaviour`: the data was collected by an older policy
+        than the current parameters (the overlapped loop's one-iteration lag); the clip is then taken
+        around the current (proximal) policy and each sample is weighted by `behaviour_weights` (the
+        decoupled objective). Without it, the behaviour policy is the current one and w = 1."""
         cfg = self.cfg
         data = storage.flat()
         n = data["obs"].shape[0]
@@ -190,11 +203,14 @@ class PPO:
         old_logp = data["log_probs"]
         adaptive = cfg.desired_kl > 0
         old_mean = old_log_std = None
-        if low is not None or adaptive:  # the behaviour policy in the update's own precision: ratio starts at 1
+        weights = None
+        if low is not None or adaptive or stale_behaviour:  # the policy at the update's start, in its precision
             with torch.no_grad():
                 old_mean, old_log_std = self.model.heads(inputs, low)[0], self.model.log_std.detach().clone()
-            if low is not None:
+            if low is not None or stale_behaviour:  # the ratio starts at exactly 1
                 old_logp = gaussian_log_prob(data["actions"], old_mean, old_log_std)
+            if stale_behaviour:
+                weights = behaviour_weights(old_logp, data["log_probs"])
         for _ in range(cfg.epochs):
             perm = torch.randperm(n, generator=self.generator).to(data["obs"].device)
             for start in range(0, n - mb + 1, mb):
@@ -216,6 +232,7 @@ class PPO:
                     data["returns"][idx],
                     cfg.clip,
                     cfg.value_clip,
+                    None if weights is None else weights[idx],
                 )
                 entropy = gaussian_entropy(self.model.log_std)
                 loss = losses["policy"] + cfg.value_coef * losses["value"] - cfg.entropy_coef * entropy
@@ -228,6 +245,8 @@ class PPO:
                 steps += 1
         stats = {f"losses/{k}": float(v) / max(steps, 1) for k, v in sums.items()}
         stats["train/ppo_lr"] = self.optimizer.param_groups[0]["lr"]
+        if weights is not None:
+            stats["losses/behaviour_weight"] = float(weights.mean())
         return stats
 
     def _adapt_lr(self, old_mean, old_log_std, mean, log_std) -> None:

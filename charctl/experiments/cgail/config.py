@@ -120,6 +120,13 @@ class TrainConfig:
     keep_checkpoint_every: int = 0
     log_every: int = 1
     torch_threads: int = 2
+    # Overlap each iteration's rollout with the previous rollout's PPO and discriminator updates, run in a
+    # second thread (CPU env only; with env.backend=warp the loop runs in turn). The rollout then acts with
+    # the policy of one update earlier, and PPO corrects for it with the decoupled objective (clip around
+    # the current policy, samples weighted by min(1, pi_current / pi_behaviour); charctl.rl.ppo). A
+    # checkpoint first finishes the pending update, so it holds every collected sample.
+    # docs/cgail.md, "Throughput".
+    overlap_update: bool = False
 
 
 @dataclass

@@ -8,7 +8,10 @@ demonstration pairs vs policy pairs (half fresh, half from the replay buffer).
 
 from __future__ import annotations
 
+import copy
+import dataclasses
 import functools
+import threading
 import time
 from dataclasses import dataclass, field
 
@@ -467,8 +470,18 @@ class CgailLearner(AgentCounters):
         self.samples_per_iteration = cfg.train.rollout_steps * self.env.N
         self.episode_lengths: list = []
         self.rng = np.random.default_rng(cfg.seed + 7919)
+        self.overlap = bool(cfg.train.overlap_update) and self.backend == "cpu"
+        # overlap: the rollout acts with this copy (the policy as of the last finished update) while the
+        # worker thread updates self.agent.model; `pending` is the rollout the next update consumes
+        self.acting = dataclasses.replace(self.agent, model=copy.deepcopy(self.agent.model)) if self.overlap else None
+        self.pending: Rollout | None = None
 
     def state_dict(self) -> dict:
+        """Checkpoint state. With the overlapped loop the pending rollout's updates are run first, so
+        the checkpoint holds every collected sample and a resume loses nothing."""
+        if self.pending is not None:
+            self._update(self.pending, stale_behaviour=True)
+            self.pending = None
         return agent_state(self.agent, self.env)
 
     def load_state_dict(self, state: dict) -> None:
@@ -482,34 +495,112 @@ class CgailLearner(AgentCounters):
         return [self.agent.model, self.agent.disc]
 
     def iterate(self) -> dict[str, float]:
-        agent, env, cfg = self.agent, self.env, self.cfg
-        env.max_steps = episode_limit_steps(cfg.env, agent.samples)
+        """One iteration: rollout, rewards, PPO and discriminator updates (in turn), or, with
+        train.overlap_update, this rollout beside the previous rollout's updates (`_iterate_overlapped`)."""
+        if self.overlap:
+            return self._iterate_overlapped()
         t0 = time.perf_counter()
-        ro = collect_rollout(agent, env, cfg.train.rollout_steps)
+        ro = self._rollout(self.agent)
         t1 = time.perf_counter()
+        rew, reward = self._rewards(ro)
+        t2 = time.perf_counter()
+        update_stats, t_ppo, t_disc = self._update(ro)
+        t4 = time.perf_counter()
+        timing = {
+            "perf/samples_per_s": self.samples_per_iteration / (t4 - t0),
+            "perf/rollout_samples_per_s": self.samples_per_iteration / (t1 - t0),
+            "perf/frac_rollout": (t1 - t0) / (t4 - t0),
+            "perf/frac_reward": (t2 - t1) / (t4 - t0),
+            "perf/frac_ppo": t_ppo / (t4 - t0),
+            "perf/frac_disc": t_disc / (t4 - t0),
+        }
+        return self._statistics(ro, rew, reward, {**update_stats, **timing})
+
+    def _iterate_overlapped(self) -> dict[str, float]:
+        """This iteration's rollout (acting with the policy of the last finished update) in the main
+        thread while a worker thread runs the PPO and discriminator updates on the previous rollout.
+        MuJoCo and torch release the GIL in their kernels, so the two share the cores; the rollout's
+        rewards use the discriminator after the worker's update."""
+        self.acting.model.load_state_dict(self.agent.model.state_dict())
+        pending, self.pending = self.pending, None
+        result: dict = {}
+        worker = None
+        if pending is not None:
+            worker = threading.Thread(target=self._update_into, args=(pending, result), name="cgail-update")
+            worker.start()
+        t0 = time.perf_counter()
+        try:
+            ro = self._rollout(self.acting)
+        finally:  # an error or Ctrl-C in the rollout still waits for the update (no thread left behind)
+            t1 = time.perf_counter()
+            if worker is not None:
+                worker.join()
+        t_wait = time.perf_counter() - t1
+        if "error" in result:
+            raise result["error"]
+        rew, reward = self._rewards(ro)
+        self.pending = ro
+        t4 = time.perf_counter()
+        update_stats, t_ppo, t_disc = result.get("out", ({}, 0.0, 0.0))
+        timing = {
+            "perf/samples_per_s": self.samples_per_iteration / (t4 - t0),
+            "perf/rollout_samples_per_s": self.samples_per_iteration / (t1 - t0),
+            "perf/frac_rollout": (t1 - t0) / (t4 - t0),
+            "perf/frac_wait_update": t_wait / (t4 - t0),  # the worker still busy after the rollout
+            "perf/frac_reward": (t4 - t1 - t_wait) / (t4 - t0),
+            "perf/frac_ppo": t_ppo / (t4 - t0),  # overlapped with the rollout: the fractions sum to > 1
+            "perf/frac_disc": t_disc / (t4 - t0),
+        }
+        return self._statistics(ro, rew, reward, {**update_stats, **timing})
+
+    def _rollout(self, actor: Agent) -> Rollout:
+        """`train.rollout_steps` control steps of every env, acting with `actor`'s policy."""
+        self.env.max_steps = episode_limit_steps(self.cfg.env, self.agent.samples)
+        return collect_rollout(actor, self.env, self.cfg.train.rollout_steps)
+
+    def _rewards(self, ro: Rollout) -> tuple[dict[str, torch.Tensor], torch.Tensor]:
+        """Discriminator rewards and the total reward of `ro`, written into its storage with the returns
+        and advantages (bootstrapped with the critic that acted)."""
+        agent, env, cfg = self.agent, self.env, self.cfg
         rew = discriminator_rewards(agent, ro)
         reward = total_reward(agent, rew, ro.r_goal, ro.r_track) + ro.bootstrap
         ro.storage.rewards = reward
+        critic = (self.acting or agent).model
         with torch.no_grad():
             dev = agent.device
             blend = torch.as_tensor(env.command_blend(), dtype=torch.float32, device=dev) if agent.conditional else None
-            last_v = agent.model.value(torch.as_tensor(env.state, dtype=torch.float32, device=dev), blend)
+            last_v = critic.value(torch.as_tensor(env.state, dtype=torch.float32, device=dev), blend)
         ro.storage.finish(last_v, cfg.ppo.gamma, cfg.ppo.lam)
         _synchronize(agent.device)  # phase timings on a GPU: wait for the queued kernels
-        t2 = time.perf_counter()
-        ppo_stats = agent.ppo.update(ro.storage)
+        return rew, reward
+
+    def _update(self, ro: Rollout, stale_behaviour: bool = False) -> tuple[dict[str, float], float, float]:
+        """PPO on `ro`, then the observation normaliser, then the discriminator: (stats, PPO s, disc s)."""
+        agent = self.agent
+        t0 = time.perf_counter()
+        ppo_stats = agent.ppo.update(ro.storage, stale_behaviour=stale_behaviour)
         # normaliser statistics move only after the update, so the PPO ratio starts at exactly 1
         agent.model.obs_norm.update(ro.storage.obs)
-        t3 = time.perf_counter()
+        t1 = time.perf_counter()
         disc_stats = update_discriminator(agent, ro, self.rng)
-        t4 = time.perf_counter()
+        return {**ppo_stats, **disc_stats}, t1 - t0, time.perf_counter() - t1
+
+    def _update_into(self, ro: Rollout, result: dict) -> None:
+        """`_update` for the worker thread: its output, or the exception it raised, into `result`."""
+        try:
+            result["out"] = self._update(ro, stale_behaviour=True)
+        except BaseException as exc:  # re-raised in the main thread
+            result["error"] = exc
+
+    def _statistics(self, ro: Rollout, rew: dict, reward: torch.Tensor, extra: dict[str, float]) -> dict[str, float]:
+        """The iteration's scalars: `extra` (update losses, timings) plus the rollout's rewards and counters."""
+        agent, env = self.agent, self.env
         agent.unstable_total += ro.unstable
         self.episode_lengths = (self.episode_lengths + list(ro.episode_lengths))[-200:]
         n = self.samples_per_iteration
-        mean_len = float(np.mean(self.episode_lengths)) if self.episode_lengths else float(cfg.train.rollout_steps)
+        mean_len = float(np.mean(self.episode_lengths)) if self.episode_lengths else float(self.cfg.train.rollout_steps)
         stats = {
-            **ppo_stats,
-            **disc_stats,
+            **extra,
             "train/r_style": float(rew["r_style"].mean()),
             "train/r_goal": float(ro.r_goal.mean()),
             "train/r_track": float(ro.r_track.mean()),
@@ -520,12 +611,6 @@ class CgailLearner(AgentCounters):
             "train/falls": float(ro.falls),
             "train/unstable_rate": float(ro.unstable) / n,
             "sim/unstable_resets": float(ro.unstable),
-            "perf/samples_per_s": n / (t4 - t0),
-            "perf/rollout_samples_per_s": n / (t1 - t0),
-            "perf/frac_rollout": (t1 - t0) / (t4 - t0),
-            "perf/frac_reward": (t2 - t1) / (t4 - t0),
-            "perf/frac_ppo": (t3 - t2) / (t4 - t0),
-            "perf/frac_disc": (t4 - t3) / (t4 - t0),
         }
         if agent.conditional and hasattr(env, "fall_rate"):
             stats.update({f"fall_rate/{sk.name}": float(r) for sk, r in zip(agent.skills, env.fall_rate)})
