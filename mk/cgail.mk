@@ -7,18 +7,21 @@ CGAIL_300HZ := env.physics_hz=300 env.armature=0.01
 # All four shipped policies were trained before the small preset's PPO update moved to bf16 where the
 # hardware has it (ppo.update_precision=auto): reproduce them with their fp32 update.
 CGAIL_FP32 := ppo.update_precision=fp32
+# All shipped policies were trained before the small preset overlapped the rollout with the updates
+# (train.overlap_update=true): reproduce them with the loop in turn.
+CGAIL_INTURN := train.overlap_update=false
 # The settings repro-cgail-small trains with; repro-cgail-current empties it to train at the current preset.
-CGAIL_SHIPPED := $(CGAIL_300HZ) $(CGAIL_FP32)
+CGAIL_SHIPPED := $(CGAIL_300HZ) $(CGAIL_FP32) $(CGAIL_INTURN)
 
 .PHONY: repro-cgail-small repro-cgail-current repro-cgail-10skill repro-cgail-10skill-temperature repro-cgail-paper demo-cgail
 
 repro-cgail-10skill: install ## cgail: the shipped ten-skill run (pretrained/README.md; ~2.3 h on 2 cores), every kept checkpoint evaluated, one picked
-	$(CHARCTL) train cgail scale=small "use_skills=[]" reward.class_form=logratio env.skill_fall_weight=0.5 train.total_samples=50000000 train.checkpoint_every=20 train.keep_checkpoint_every=2500000 seed=1 output_root=$(CGAIL_SMALL)/ten
+	$(CHARCTL) train cgail scale=small "use_skills=[]" reward.class_form=logratio env.skill_fall_weight=0.5 train.total_samples=50000000 train.checkpoint_every=20 train.keep_checkpoint_every=2500000 $(CGAIL_INTURN) seed=1 output_root=$(CGAIL_SMALL)/ten
 	C=$$(ls -d $(CGAIL_SMALL)/ten/cgail/*/ | tail -1); \
 	$(VENV)/bin/python scripts/eval_checkpoints.py $$C --after 10000000
 
 repro-cgail-10skill-temperature: install ## cgail: the third ten-skill run, with a learned class temperature (pretrained/cgail-10skill-temperature; ~2 h on 2 cores), every kept checkpoint evaluated
-	$(CHARCTL) train cgail scale=small "use_skills=[]" reward.class_form=logratio env.skill_fall_weight=0.5 disc.learn_class_scale=true train.total_samples=45000000 train.checkpoint_every=20 train.keep_checkpoint_every=2500000 seed=1 output_root=$(CGAIL_SMALL)/ten-temperature
+	$(CHARCTL) train cgail scale=small "use_skills=[]" reward.class_form=logratio env.skill_fall_weight=0.5 disc.learn_class_scale=true train.total_samples=45000000 train.checkpoint_every=20 train.keep_checkpoint_every=2500000 $(CGAIL_INTURN) seed=1 output_root=$(CGAIL_SMALL)/ten-temperature
 	C=$$(ls -d $(CGAIL_SMALL)/ten-temperature/cgail/*/ | tail -1); \
 	$(VENV)/bin/python scripts/eval_checkpoints.py $$C --after 15000000
 

@@ -6,7 +6,9 @@
 
 1. raw batched physics: BatchedHumanoid.step with fixed PD targets (control steps/s = samples/s)
 2. rollout: sim + observations + policy forward + discriminator reward (samples/s)
-3. the whole training loop (rollout + reward + PPO + discriminator update), with time fractions.
+3. the whole training loop, `CgailLearner.iterate` as `charctl train` runs it (rollout + reward + PPO +
+   discriminator update; with train.overlap_update the updates run beside the next rollout), with the
+   share of wall time of each phase.
 Prints rollout/raw (target >= 70 %) and what limits it.
 
 `--against REV` exports commit REV's tree (git archive) to a temporary folder and runs its own
@@ -46,11 +48,10 @@ def main() -> None:
     from charctl.experiments.cgail.config import Config
     from charctl.experiments.cgail.env import CgailEnv
     from charctl.experiments.cgail.train import (
+        CgailLearner,
         build_agent,
         collect_rollout,
         discriminator_rewards,
-        total_reward,
-        update_discriminator,
     )
 
     cfg = compose_config("cgail", [*a.overrides, f"env.num_envs={a.envs}"], Config)
@@ -74,31 +75,18 @@ def main() -> None:
         ro = collect_rollout(agent, env, T)
         discriminator_rewards(agent, ro)
     rollout = T * a.iters * env.N / (time.perf_counter() - t0)
-    # 3. full training iterations
-    rng = np.random.default_rng(0)
-    phases = {"rollout": 0.0, "reward": 0.0, "ppo": 0.0, "disc": 0.0}
+    # 3. full training iterations: the training loop itself (CgailLearner.iterate), after one warm-up
+    # iteration (with train.overlap_update the first iteration has no update to overlap)
+    learner = CgailLearner(cfg)
+    learner.iterate()
+    phases: dict[str, float] = {}
     t_all = time.perf_counter()
     for _ in range(a.iters):
-        t0 = time.perf_counter()
-        ro = collect_rollout(agent, env, T)
-        t1 = time.perf_counter()
-        rew = discriminator_rewards(agent, ro)
-        ro.storage.rewards = total_reward(agent, rew, ro.r_goal) + ro.bootstrap
-        with torch.no_grad():
-            lv = agent.model.value(
-                torch.as_tensor(env.state, dtype=torch.float32),
-                torch.as_tensor(env.command_blend(), dtype=torch.float32),
-            )
-        ro.storage.finish(lv, cfg.ppo.gamma, cfg.ppo.lam)
-        t2 = time.perf_counter()
-        agent.ppo.update(ro.storage)
-        t3 = time.perf_counter()
-        update_discriminator(agent, ro, rng)
-        t4 = time.perf_counter()
-        for k, v in zip(phases, (t1 - t0, t2 - t1, t3 - t2, t4 - t3)):
-            phases[k] += v
+        stats = learner.iterate()
+        for k, v in stats.items():
+            if k.startswith("perf/frac_"):
+                phases[k.removeprefix("perf/frac_")] = phases.get(k.removeprefix("perf/frac_"), 0.0) + v / a.iters
     full = T * a.iters * env.N / (time.perf_counter() - t_all)
-    total = sum(phases.values())
     print(
         f"cgail bench: {env.N} envs, physics {cfg.env.physics_hz:.0f} Hz / control "
         f"{cfg.env.control_hz:.0f} Hz, policy {list(cfg.ppo.hidden)}, disc {list(cfg.disc.hidden)}"
@@ -109,7 +97,11 @@ def main() -> None:
         f"= {100 * rollout / raw:.0f} % of raw physics (target >= 70 %)"
     )
     print(f"  whole training loop     {full:10,.0f} samples/s")
-    print("  time per phase: " + ", ".join(f"{k} {100 * v / total:.0f} %" for k, v in phases.items()))
+    overlap = "overlapped with the rollout, " if learner.overlap else ""
+    print(
+        f"  time per phase ({overlap}share of the loop's wall time): "
+        + ", ".join(f"{k} {100 * v:.0f} %" for k, v in phases.items())
+    )
 
 
 LOOP_LINE = re.compile(r"whole training loop\s+([\d,]+) samples/s")

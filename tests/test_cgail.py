@@ -312,3 +312,50 @@ def test_kept_checkpoints_are_evaluated_by_name(smoke_run_copy):
         load_trained_run(run_dir, "../last.pt")
     with pytest.raises(CharctlError, match="checkpoint not found"):
         load_trained_run(run_dir, "samples_000000001.pt")
+
+
+def _overlapped_learner(tmp_path, seed: int = 0):
+    from charctl.config import compose_config
+    from charctl.experiments.cgail.config import Config
+    from charctl.experiments.cgail.train import CgailLearner
+
+    cfg = compose_config("cgail", ["scale=smoke", "train.overlap_update=true", f"seed={seed}"], Config)
+    return CgailLearner(cfg)
+
+
+def test_overlapped_loop_acts_one_update_behind_and_checkpoints_every_sample(tmp_path):
+    """train.overlap_update: iteration k's rollout acts with the parameters before the update of rollout
+    k-1 (that update runs beside it); state_dict() first finishes the pending update; the same seed gives
+    the same parameters (the worker thread draws only from the learner's own generators)."""
+    learner = _overlapped_learner(tmp_path)
+    weight = learner.agent.model.actor[0].weight
+    p0 = weight.detach().clone()
+    first = learner.iterate()  # nothing to overlap yet: rollout only
+    assert torch.equal(weight, p0) and learner.pending is not None and "losses/policy" not in first
+    second = learner.iterate()  # update of rollout 1 beside rollout 2, which acted with p0
+    assert torch.equal(learner.acting.model.actor[0].weight, p0) and not torch.equal(weight, p0)
+    assert second["losses/behaviour_weight"] == pytest.approx(1.0)  # rollout 1 acted with p0 = the proximal policy
+    p2 = weight.detach().clone()
+    third = learner.iterate()  # rollout 2 acted with p0, the update starts from p2: weights below 1
+    assert third["losses/behaviour_weight"] < 1.0
+    state = learner.state_dict()
+    assert learner.pending is None and not torch.equal(weight, p2)
+    twin = _overlapped_learner(tmp_path)
+    for _ in range(3):
+        twin.iterate()
+    twin_state = twin.state_dict()
+    for k, v in state["ppo"]["model"].items():
+        assert torch.equal(v, twin_state["ppo"]["model"][k]), k
+
+
+def test_overlapped_update_error_reaches_the_main_thread(tmp_path, monkeypatch):
+    """An exception in the worker thread's update is raised by iterate(), after the rollout finished."""
+    learner = _overlapped_learner(tmp_path)
+    learner.iterate()
+
+    def broken(*args, **kwargs):
+        raise RuntimeError("update failed")
+
+    monkeypatch.setattr(learner.agent.ppo, "update", broken)
+    with pytest.raises(RuntimeError, match="update failed"):
+        learner.iterate()

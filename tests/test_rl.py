@@ -230,3 +230,40 @@ def test_adaptive_lr_falls_when_the_update_overshoots_and_is_checked():
     assert "ppo.desired_kl must be >= 0" in check_ppo(cfg)
     cfg = PPOConfig(desired_kl=0.01, lr_min=1e-3, lr_max=1e-4)
     assert "0 < lr_min <= lr_max" in check_ppo(cfg)
+
+
+def test_decoupled_objective_weights_by_hand():
+    """behaviour_weights = min(1, pi_prox / pi_behav); the policy loss is the weighted clipped surrogate.
+    Hand values: prox - behav = -0.5 -> exp(-0.5) = 0.6065; +0.3 -> 1 (truncated); -100 -> exp(-20)."""
+    from charctl.rl.ppo import LOG_RATIO_LIMIT, behaviour_weights
+
+    w = behaviour_weights(torch.tensor([-0.5, 0.3, -100.0]), torch.zeros(3))
+    assert w.tolist() == pytest.approx([math.exp(-0.5), 1.0, math.exp(-LOG_RATIO_LIMIT)], rel=1e-6)
+    new, old = torch.tensor([0.1, 0.0]), torch.zeros(2)
+    adv, v = torch.tensor([1.0, 2.0]), torch.zeros(2)
+    out = ppo_losses(new, old, adv, v, v, v, clip=0.2, weights=torch.tensor([0.5, 1.0]))
+    assert float(out["policy"]) == pytest.approx(-(0.5 * math.exp(0.1) * 1.0 + 1.0 * 2.0) / 2, rel=1e-6)
+
+
+def test_stale_behaviour_update_clips_around_the_current_policy():
+    """Data from an older policy: with lr 0 the update's ratio starts at exactly 1 (no clipping, KL 0)
+    although the stored behaviour log-probs differ, and the mean weight is min(1, pi_now / pi_behav)."""
+    from charctl.rl.ppo import behaviour_weights
+
+    torch.manual_seed(2)
+    cfg = PPOConfig(hidden=[32, 32], action_std=0.1, lr=0.0, epochs=1, minibatch_size=64)
+    model = ActorCritic(4, 2, cfg)
+    st = RolloutStorage(2, 64, 4, 2, 0)
+    shifts = []
+    for _ in range(2):
+        obs = torch.randn(64, 4)
+        a, logp, v = model.act(obs)
+        shift = 0.4 * torch.randn(64)  # the behaviour policy gave these actions other probabilities
+        shifts.append(shift)
+        st.add(obs, None, a, logp + shift, v, torch.randn(64), torch.zeros(64))
+    st.finish(torch.zeros(64), 0.99, 0.95)
+    stats = PPO(model, cfg).update(st, stale_behaviour=True)
+    assert stats["losses/approx_kl"] == pytest.approx(0.0, abs=1e-7)
+    assert stats["losses/clip_frac"] == 0.0
+    expected = behaviour_weights(-torch.cat(shifts), torch.zeros(128)).mean()
+    assert stats["losses/behaviour_weight"] == pytest.approx(float(expected), rel=1e-5)

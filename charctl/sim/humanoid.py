@@ -11,6 +11,10 @@ of DeepMimic (kp, kd = kv) and its torque limit; knees and elbows are single hin
 The `implicitfast` integrator treats the kd term implicitly, which is what keeps PD stable at
 low physics rates (the role the paper's stable PD, eq 3.1, plays). Self-collision is off
 (as in DeepMimic); bodies collide with the ground plane only.
+
+Solver warm start is off: MuJoCo's Newton solver converges to its tolerance (1e-8) either way, and
+from a cold start it needs fewer iterations on this model (2.1 against 2.5 per step), so batched
+clip tracking runs 9 % faster with the same tracking error (docs/cgail.md, "Throughput").
 """
 
 from __future__ import annotations
@@ -151,7 +155,9 @@ def build_mjcf(
     acts = "\n    ".join(actuators)
     return f"""<mujoco model="charctl_humanoid3d">
   <compiler angle="radian" inertiafromgeom="true"/>
-  <option timestep="{1.0 / physics_hz:.8f}" gravity="0 -9.81 0" integrator="implicitfast"/>
+  <option timestep="{1.0 / physics_hz:.8f}" gravity="0 -9.81 0" integrator="implicitfast">
+    <flag warmstart="disable"/>
+  </option>
   <size memory="4M"/>
   <visual><global offwidth="1280" offheight="720"/><quality shadowsize="2048"/></visual>
   <default>
