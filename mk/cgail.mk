@@ -36,7 +36,7 @@ repro-cgail-small: install ## cgail: the shipped policies' runs (pretrained/READ
 	$(CHARCTL) eval $$C $$A $$T --survival 10 --dtw -k 8 -o $(CGAIL_SMALL)
 	@echo "report: $(CGAIL_SMALL)/report.md"
 
-repro-cgail-current: install ## cgail: repro-cgail-small's three runs at the current small preset (150 Hz physics, bf16 PPO update; docs/cgail.md "The current preset, re-run"; ~45 min on 2 cores), evaluated
+repro-cgail-current: install ## cgail: repro-cgail-small's three runs at the current small preset (150 Hz physics, bf16 PPO update, overlapped loop; docs/cgail.md "Throughput"; ~45 min on 2 cores), evaluated
 	$(MAKE) --no-print-directory repro-cgail-small CGAIL_SHIPPED= CGAIL_SMALL=outputs/repro/cgail-current
 
 repro-cgail-paper: install ## cgail: the paper's runs (10 skills, AMP, LS ablation, 1/3/6 skills); GPU/cluster scale
