@@ -128,6 +128,17 @@ class Live:
                 break
         raise AssertionError("training never started:\n" + "".join(self.err))
 
+    def wait_for_line(self, text: str, timeout: float = LIMIT) -> None:
+        """Until a stderr line containing `text` (e.g. the stop handler's message)."""
+        deadline = time.time() + timeout
+        for line in self.proc.stderr:
+            self.err.append(line)
+            if text in line:
+                return
+            if time.time() > deadline:
+                break
+        raise AssertionError(f"no line with {text!r}:\n" + "".join(self.err))
+
     def signal(self, sig: int) -> None:
         self.proc.send_signal(sig)
 
@@ -370,8 +381,12 @@ def test_interrupt_writes_checkpoint_and_exit_code(experiment, signals, code, tm
     live = Live("train", experiment, *LONG_RUNS[experiment], f"output_root={out}", cwd=tmp_path)
     live.wait_for_progress()
     time.sleep(0.3)
-    for s in signals:
+    for i, s in enumerate(signals):
         live.signal(getattr(signal, s))
+        if i == 0 and len(signals) > 1:
+            # Python runs the handlers of signals pending together in signal-number order (SIGINT before
+            # SIGTERM): the next one goes only after the first was handled, so the order is the test's
+            live.wait_for_line("stopping:")
         time.sleep(0.05)
     res = live.finish()
     assert res.returncode == code, f"exit {res.returncode}:\n{res.stdout}\n{res.stderr}"
