@@ -245,13 +245,16 @@ def test_decoupled_objective_weights_by_hand():
     assert float(out["policy"]) == pytest.approx(-(0.5 * math.exp(0.1) * 1.0 + 1.0 * 2.0) / 2, rel=1e-6)
 
 
-def test_stale_behaviour_update_clips_around_the_current_policy():
+@pytest.mark.parametrize("precision", ["fp32", "bf16"])
+def test_stale_behaviour_update_clips_around_the_current_policy(precision):
     """Data from an older policy: with lr 0 the update's ratio starts at exactly 1 (no clipping, KL 0)
-    although the stored behaviour log-probs differ, and the mean weight is min(1, pi_now / pi_behav)."""
+    although the stored behaviour log-probs differ, and the mean weight is min(1, pi_now / pi_behav),
+    with the proximal log-probs in fp32 also when the update runs in bf16 (no rounding bias)."""
     from charctl.rl.ppo import behaviour_weights
 
     torch.manual_seed(2)
     cfg = PPOConfig(hidden=[32, 32], action_std=0.1, lr=0.0, epochs=1, minibatch_size=64)
+    cfg.update_precision = precision
     model = ActorCritic(4, 2, cfg)
     st = RolloutStorage(2, 64, 4, 2, 0)
     shifts = []

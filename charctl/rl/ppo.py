@@ -207,10 +207,12 @@ class PPO:
         if low is not None or adaptive or stale_behaviour:  # the policy at the update's start, in its precision
             with torch.no_grad():
                 old_mean, old_log_std = self.model.heads(inputs, low)[0], self.model.log_std.detach().clone()
-            if low is not None or stale_behaviour:  # the ratio starts at exactly 1
-                old_logp = gaussian_log_prob(data["actions"], old_mean, old_log_std)
-            if stale_behaviour:
-                weights = behaviour_weights(old_logp, data["log_probs"])
+                if low is not None or stale_behaviour:  # the ratio starts at exactly 1
+                    old_logp = gaussian_log_prob(data["actions"], old_mean, old_log_std)
+                if stale_behaviour:  # compared with the fp32 behaviour log-probs: the proximal ones in fp32 too
+                    prox_mean = old_mean if low is None else self.model.heads(inputs)[0]
+                    prox_logp = gaussian_log_prob(data["actions"], prox_mean, old_log_std)
+                    weights = behaviour_weights(prox_logp, data["log_probs"])
         for _ in range(cfg.epochs):
             perm = torch.randperm(n, generator=self.generator).to(data["obs"].device)
             for start in range(0, n - mb + 1, mb):
