@@ -102,12 +102,23 @@ class DiscConfig:
     # the classifier can get; false = the paper's plain spectral-normalised head. docs/cgail.md, "Ten skills".
     learn_class_scale: bool = False
     demo_oversample: int = 1  # demonstration pairs at clip times on a 1/(control_hz*k) grid; 1 = frames only
+    # Style head: shared (the paper: one score D for every skill) | per_skill (one style logit per skill from the
+    # shared trunk, the command's own used for policy pairs and the clip's for data: C-ASE / CALM). Needs
+    # cgail.conditional. docs/cgail.md, "Fidelity recipe".
+    style_head: str = "shared"
+    # per_skill only: this share of the policy half of each discriminator batch is replaced by demonstration
+    # pairs scored for a skill they do not belong to (fakes for that skill's logit; CALM's negatives). 0 = off.
+    wrong_skill_fakes: float = 0.0
 
 
 @dataclass
 class CgailSection:
     conditional: bool = True  # false = AMP baseline: no class head, no command input, style reward only
     class_loss: str = "ce"  # ce (eq 4.5) | ls (least squares ablation, eq 6.2)
+    # The class head also trains on policy pairs labelled with their command (eq 4.5, the paper). false =
+    # on demonstrations only, so r_C pays for looking like the commanded clip, not for the policy's own
+    # per-command habits. docs/cgail.md, "Fidelity recipe".
+    class_on_policy: bool = True
 
 
 @dataclass
@@ -160,6 +171,14 @@ class Config(BaseConfig):
             return f"reward.class_form must be 'l1', 'prob' or 'logratio', got {cfg.reward.class_form!r}"
         if cfg.disc.objective not in ("lsgan", "bce"):
             return f"disc.objective must be 'lsgan' or 'bce', got {cfg.disc.objective!r}"
+        if cfg.disc.style_head not in ("shared", "per_skill"):
+            return f"disc.style_head must be 'shared' or 'per_skill', got {cfg.disc.style_head!r}"
+        if cfg.disc.style_head == "per_skill" and not cfg.cgail.conditional:
+            return "disc.style_head=per_skill needs cgail.conditional=true (it scores pairs for their command)"
+        if not 0.0 <= cfg.disc.wrong_skill_fakes < 1.0:
+            return f"disc.wrong_skill_fakes must lie in [0, 1), got {cfg.disc.wrong_skill_fakes}"
+        if cfg.disc.wrong_skill_fakes > 0 and cfg.disc.style_head != "per_skill":
+            return "disc.wrong_skill_fakes needs disc.style_head=per_skill"
         if cfg.cgail.class_loss not in ("ce", "ls"):
             return f"cgail.class_loss must be 'ce' or 'ls', got {cfg.cgail.class_loss!r}"
         ratio = cfg.env.physics_hz / cfg.env.control_hz

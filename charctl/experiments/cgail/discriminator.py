@@ -11,6 +11,11 @@ Losses (eq 4.2-4.6):
     L_gp    = (w_gp / 2) E_M[ ||∇_φ D(φ)||^2 ]
 Rewards: r_S = clip(1 - 1/4 (1 - D)^2, 0, 1) (eq 4.7); r_C = 1 - min(1, ||softmax C - c̄||_1) (eq 4.8),
 blended (1 - w) r_C(c_A) + w r_C(c_B) during a transition (eq 4.11).
+
+Style head: ``shared`` (the paper) is one score D(φ) for every skill, so nothing asks the kick command for
+kick-like style. ``per_skill`` (C·ASE's one style logit per skill label, CALM's latent-conditioned
+discriminator) has one score D_k(φ) per skill from the shared trunk; the score for a command blend c̄ is
+D(φ, c̄) = Σ_k c̄_k D_k(φ): data pairs use their clip's logit, policy pairs the logit of their command.
 """
 
 from __future__ import annotations
@@ -22,6 +27,7 @@ from torch import nn
 from charctl.nn.mlp import ACTIVATIONS, RunningNorm
 
 SN = nn.utils.parametrizations.spectral_norm
+STYLE_HEADS = ("shared", "per_skill")
 
 
 class Discriminator(nn.Module):
@@ -33,6 +39,7 @@ class Discriminator(nn.Module):
         conditional: bool = True,
         activation: str = "relu",
         learn_class_scale: bool = False,
+        style_head: str = "shared",
     ):
         super().__init__()
         self.norm = RunningNorm(pair_dim, clip=10.0)
@@ -42,18 +49,30 @@ class Discriminator(nn.Module):
             layers += [SN(nn.Linear(d, h)), ACTIVATIONS[activation]()]
             d = h
         self.trunk = nn.Sequential(*layers)
-        self.style_head = SN(nn.Linear(d, 1))
+        if style_head not in STYLE_HEADS:
+            raise ValueError(f"unknown style head {style_head!r}; choose from {STYLE_HEADS}")
+        self.per_skill = style_head == "per_skill"
+        self.style_head = SN(nn.Linear(d, num_classes if self.per_skill else 1))
         self.conditional = conditional
         self.class_head = SN(nn.Linear(d, num_classes)) if conditional else None
         # log of the class logits' temperature; a parameter only when learned (older checkpoints load unchanged)
         self.class_log_scale = nn.Parameter(torch.zeros(())) if conditional and learn_class_scale else None
         self.num_classes = num_classes
 
-    def forward(self, pairs: torch.Tensor, normalized: bool = False) -> tuple[torch.Tensor, torch.Tensor | None]:
-        """(D score (B,), class logits (B, K) or None)."""
+    def forward(
+        self, pairs: torch.Tensor, normalized: bool = False, cond: torch.Tensor | None = None
+    ) -> tuple[torch.Tensor, torch.Tensor | None]:
+        """(D score (B,), class logits (B, K) or None). `cond` (B, K): the command blend c̄ (or the clip's
+        one-hot label) the per-skill style head scores the pairs for; the shared head ignores it."""
         x = pairs if normalized else self.norm(pairs)
         h = self.trunk(x)
-        d = self.style_head(h).squeeze(-1)
+        d = self.style_head(h)
+        if self.per_skill:
+            if cond is None:
+                raise ValueError("a per-skill style head needs the command blend `cond` (B, K)")
+            d = (d * cond.to(d.dtype)).sum(-1)
+        else:
+            d = d.squeeze(-1)
         if self.class_head is None:
             return d, None
         logits = self.class_head(h)
@@ -71,6 +90,13 @@ def style_loss(d_data: torch.Tensor, d_policy: torch.Tensor, kind: str = "lsgan"
     if kind == "bce":
         return F.softplus(-d_data).mean() + F.softplus(d_policy).mean()
     raise ValueError(f"unknown style loss {kind!r}")
+
+
+def wrong_skill_labels(labels: torch.Tensor, num_classes: int, generator: torch.Generator | None = None) -> torch.Tensor:
+    """(B,) a skill other than each of `labels`, uniformly (CALM's negatives: a demonstration pair scored
+    for a skill it does not belong to is a fake for that skill's style logit). Needs num_classes >= 2."""
+    shift = torch.randint(1, num_classes, labels.shape, generator=generator).to(labels.device)
+    return (labels + shift) % num_classes
 
 
 def logit_regulariser(disc: Discriminator) -> torch.Tensor:
@@ -92,10 +118,13 @@ def class_loss(logits: torch.Tensor, target: torch.Tensor, kind: str = "ce") -> 
     raise ValueError(f"unknown class loss {kind!r}")
 
 
-def gradient_penalty(disc: Discriminator, pairs_normalized: torch.Tensor, w_gp: float) -> torch.Tensor:
-    """(w_gp / 2) E[||∇_φ D(φ)||^2] on (normalised) data pairs, eq 4.6."""
+def gradient_penalty(
+    disc: Discriminator, pairs_normalized: torch.Tensor, w_gp: float, cond: torch.Tensor | None = None
+) -> torch.Tensor:
+    """(w_gp / 2) E[||∇_φ D(φ, c)||^2] on (normalised) data pairs, eq 4.6 (`cond`: their one-hot labels,
+    used by a per-skill style head)."""
     x = pairs_normalized.detach().requires_grad_(True)
-    d, _ = disc(x, normalized=True)
+    d, _ = disc(x, normalized=True, cond=cond)
     (grad,) = torch.autograd.grad(d.sum(), x, create_graph=True)
     return 0.5 * w_gp * (grad**2).sum(-1).mean()
 

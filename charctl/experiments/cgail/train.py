@@ -29,6 +29,7 @@ from charctl.experiments.cgail.discriminator import (
     style_loss,
     style_reward,
     weight_decay_term,
+    wrong_skill_labels,
 )
 from charctl.experiments.cgail.env import CgailEnv
 from charctl.experiments.cgail.skills import DemoPairs, load_skills, select_skills
@@ -98,6 +99,7 @@ def build_agent(cfg, device: str = "cpu") -> Agent:
         list(cfg.disc.hidden),
         conditional=conditional,
         learn_class_scale=cfg.disc.learn_class_scale,
+        style_head=cfg.disc.style_head,
     )
     demos = DemoPairs(skills)
     pairs, _ = demos.all()
@@ -310,7 +312,7 @@ def _collect_rollout_device(agent: Agent, env, steps: int, deterministic: bool) 
 def discriminator_rewards(agent: Agent, ro: Rollout) -> dict[str, torch.Tensor]:
     """r_S, r_C (blended) and class probabilities for every rollout pair, in one forward."""
     T, N = ro.pairs.shape[:2]
-    d, logits = agent.disc(ro.pairs.reshape(T * N, -1))
+    d, logits = agent.disc(ro.pairs.reshape(T * N, -1), cond=ro.cond.reshape(T * N, -1))
     out = {"d": d.reshape(T, N), "r_style": style_reward(d, agent.cfg.disc.objective).reshape(T, N)}
     if logits is not None:
         probs = F.softmax(logits, dim=-1)
@@ -344,6 +346,8 @@ def total_reward(
 def update_discriminator(agent: Agent, ro: Rollout, rng: np.random.Generator) -> dict[str, float]:
     cfg = agent.cfg.disc
     K = agent.num_skills
+    class_on_policy = bool(agent.cfg.cgail.class_on_policy)
+    n_wrong = int(cfg.batch_size * cfg.wrong_skill_fakes) if K > 1 else 0
     fresh_pairs = ro.pairs.reshape(-1, ro.pairs.shape[-1])
     fresh_cond = ro.cond.reshape(-1, K)
     stats: dict[str, float] = {}
@@ -355,17 +359,25 @@ def update_discriminator(agent: Agent, ro: Rollout, rng: np.random.Generator) ->
             demo, labels = agent.demos.sample(cfg.batch_size, rng)
             demo = torch.from_numpy(demo)
             labels = torch.from_numpy(labels)
-        n_replay = int(cfg.batch_size * cfg.replay_fraction) if agent.replay.size > 0 else 0
-        idx = torch.randint(0, fresh_pairs.shape[0], (cfg.batch_size - n_replay,), generator=agent.generator).to(dev)
+        demo, labels = demo.to(dev), labels.to(dev)
+        n_pol = cfg.batch_size - n_wrong
+        n_replay = int(n_pol * cfg.replay_fraction) if agent.replay.size > 0 else 0
+        idx = torch.randint(0, fresh_pairs.shape[0], (n_pol - n_replay,), generator=agent.generator).to(dev)
         pol, pol_c = fresh_pairs[idx], fresh_cond[idx]
         if n_replay:
             rp, rc = agent.replay.sample(n_replay, agent.generator)
             pol, pol_c = torch.cat([pol, rp]), torch.cat([pol_c, rc])
+        demo_onehot = F.one_hot(labels, K).float()
         demo_n = agent.disc.norm(demo)
-        d_data, c_data = agent.disc(demo_n, normalized=True)
-        d_pol, c_pol = agent.disc(pol)
-        l_style = style_loss(d_data, d_pol, cfg.objective)
-        l_gp = gradient_penalty(agent.disc, demo_n, cfg.w_gp)
+        d_data, c_data = agent.disc(demo_n, normalized=True, cond=demo_onehot)
+        d_pol, c_pol = agent.disc(pol, cond=pol_c)
+        d_fake = d_pol
+        if n_wrong:  # demonstration pairs scored for another skill: fakes for that skill's logit
+            wrong = wrong_skill_labels(labels[:n_wrong], K, agent.generator)
+            d_wrong, _ = agent.disc(demo_n[:n_wrong], normalized=True, cond=F.one_hot(wrong, K).float())
+            d_fake = torch.cat([d_pol, d_wrong])
+        l_style = style_loss(d_data, d_fake, cfg.objective)
+        l_gp = gradient_penalty(agent.disc, demo_n, cfg.w_gp, cond=demo_onehot)
         loss = l_style + l_gp
         if cfg.logit_reg > 0:
             loss = loss + cfg.logit_reg * logit_regulariser(agent.disc)
@@ -374,7 +386,9 @@ def update_discriminator(agent: Agent, ro: Rollout, rng: np.random.Generator) ->
         l_cls = torch.zeros((), device=dev)
         if agent.conditional:
             kind = agent.cfg.cgail.class_loss
-            l_cls = class_loss(c_data, F.one_hot(labels, K).float(), kind) + class_loss(c_pol, pol_c, kind)
+            l_cls = class_loss(c_data, demo_onehot, kind)
+            if class_on_policy:
+                l_cls = l_cls + class_loss(c_pol, pol_c, kind)
             loss = loss + cfg.w_class_loss * l_cls
         agent.disc_opt.zero_grad(set_to_none=True)
         loss.backward()
@@ -386,6 +400,7 @@ def update_discriminator(agent: Agent, ro: Rollout, rng: np.random.Generator) ->
                 "losses/disc_class": float(l_cls),
                 "train/disc_acc_data": float((d_data > 0).float().mean()),
                 "train/disc_acc_policy": float((d_pol < 0).float().mean()),
+                **({"train/disc_acc_wrong_skill": float((d_fake[n_pol:] < 0).float().mean())} if n_wrong else {}),
             }
             if agent.conditional:
                 hit = (c_data.argmax(-1) == labels).float()

@@ -1,0 +1,130 @@
+"""Per-skill style head (disc.style_head=per_skill), CALM's wrong-skill fakes and the class head on
+demonstrations only (cgail.class_on_policy=false): hand-checked scores, losses and config errors."""
+
+import pytest
+import torch
+
+from charctl.experiments.cgail.discriminator import (
+    Discriminator,
+    gradient_penalty,
+    wrong_skill_labels,
+)
+
+torch.set_num_threads(1)
+
+
+def _disc(K: int = 3) -> Discriminator:
+    torch.manual_seed(0)
+    d = Discriminator(6, K, [8], style_head="per_skill").double()
+    d.eval()
+    return d
+
+
+def test_per_skill_score_is_the_commanded_logit_and_blends_linearly():
+    disc = _disc()
+    x = torch.randn(4, 6, dtype=torch.float64)
+    with torch.no_grad():
+        logits = disc.style_head(disc.trunk(x))  # (4, 3): one style logit per skill
+        eye = torch.eye(3, dtype=torch.float64)
+        for k in range(3):
+            d, _ = disc(x, normalized=True, cond=eye[k].expand(4, 3))
+            assert torch.allclose(d, logits[:, k])
+        blend = torch.tensor([0.25, 0.75, 0.0], dtype=torch.float64).expand(4, 3)
+        d, _ = disc(x, normalized=True, cond=blend)
+        assert torch.allclose(d, 0.25 * logits[:, 0] + 0.75 * logits[:, 1])
+
+
+def test_per_skill_head_needs_the_command_and_shared_head_ignores_it():
+    disc = _disc()
+    with pytest.raises(ValueError, match="command blend"):
+        disc(torch.zeros(2, 6, dtype=torch.float64), normalized=True)
+    shared = Discriminator(6, 3, [8]).double().eval()
+    x = torch.randn(2, 6, dtype=torch.float64)
+    with torch.no_grad():
+        a, _ = shared(x, normalized=True)
+        b, _ = shared(x, normalized=True, cond=torch.eye(3, dtype=torch.float64)[:2])
+    assert torch.equal(a, b) and a.shape == (2,)
+    with pytest.raises(ValueError, match="style head"):
+        Discriminator(6, 3, [8], style_head="per_clip")
+
+
+def test_gradient_penalty_of_the_labelled_logit_matches_finite_differences():
+    disc = _disc()
+    x = torch.randn(2, 6, dtype=torch.float64)
+    cond = torch.eye(3, dtype=torch.float64)[[2, 0]]
+    gp = gradient_penalty(disc, x, w_gp=2.0, cond=cond).item()
+    eps, sq = 1e-6, []
+    for i in range(2):
+        g = []
+        for j in range(6):
+            e = torch.zeros(6, dtype=torch.float64)
+            e[j] = eps
+            with torch.no_grad():
+                hi = disc(x[i : i + 1] + e, normalized=True, cond=cond[i : i + 1])[0]
+                lo = disc(x[i : i + 1] - e, normalized=True, cond=cond[i : i + 1])[0]
+            g.append(((hi - lo) / (2 * eps)).item())
+        sq.append(sum(v * v for v in g))
+    assert gp == pytest.approx(1.0 * sum(sq) / 2, rel=1e-4)  # (w_gp / 2) * mean ||grad||^2
+
+
+def test_wrong_skill_labels_never_return_the_own_label_and_cover_the_others():
+    labels = torch.tensor([0, 1, 2] * 2000)
+    wrong = wrong_skill_labels(labels, 3, torch.Generator().manual_seed(0))
+    assert not (wrong == labels).any()
+    for k in range(3):
+        others = wrong[labels == k]
+        counts = torch.bincount(others, minlength=3).float() / len(others)
+        assert counts[k] == 0 and all(abs(counts[j] - 0.5) < 0.05 for j in range(3) if j != k)
+
+
+@pytest.mark.parametrize(
+    ("overrides", "message"),
+    [
+        ({"disc": {"style_head": "per_clip"}}, "disc.style_head"),
+        ({"disc": {"style_head": "per_skill"}, "cgail": {"conditional": False}}, "needs cgail.conditional"),
+        ({"disc": {"wrong_skill_fakes": 0.25}}, "needs disc.style_head=per_skill"),
+        ({"disc": {"style_head": "per_skill", "wrong_skill_fakes": 1.0}}, "must lie in"),
+    ],
+)
+def test_config_errors(overrides, message):
+    from omegaconf import OmegaConf
+
+    from charctl.experiments.cgail.config import Config
+
+    cfg = OmegaConf.merge(OmegaConf.structured(Config), overrides)
+    assert message in Config.check(cfg)
+
+
+def test_update_trains_the_class_head_on_demonstrations_only_when_asked():
+    """With cgail.class_on_policy=false the class loss is the demonstration term alone: a policy batch
+    whose command labels are all wrong leaves it unchanged (the same seed, both settings)."""
+    from omegaconf import OmegaConf
+
+    from charctl.experiments.cgail.config import Config
+    from charctl.experiments.cgail.train import CgailLearner
+
+    def losses(class_on_policy: bool) -> float:
+        cfg = OmegaConf.merge(
+            OmegaConf.structured(Config),
+            {
+                "use_skills": ["walk", "right_kick"],
+                "env": {"num_envs": 4, "episode_seconds": 1.0},
+                "ppo": {"hidden": [16], "minibatch_size": 32, "epochs": 1},
+                "disc": {
+                    "hidden": [16],
+                    "batch_size": 32,
+                    "steps_per_iter": 1,
+                    "replay_size": 256,
+                    "style_head": "per_skill",
+                    "wrong_skill_fakes": 0.25,
+                },
+                "cgail": {"class_on_policy": class_on_policy},
+                "train": {"rollout_steps": 8, "torch_threads": 1},
+            },
+        )
+        stats = CgailLearner(cfg).iterate()
+        return stats["losses/disc_class"], stats["train/disc_acc_wrong_skill"]
+
+    (with_policy, acc_w1), (demo_only, acc_w2) = losses(True), losses(False)
+    assert demo_only < with_policy  # the policy term (>= 0, here ~log 2) is gone
+    assert 0.0 <= acc_w1 <= 1.0 and 0.0 <= acc_w2 <= 1.0
