@@ -128,3 +128,32 @@ def test_update_trains_the_class_head_on_demonstrations_only_when_asked():
     (with_policy, acc_w1), (demo_only, acc_w2) = losses(True), losses(False)
     assert demo_only < with_policy  # the policy term (>= 0, here ~log 2) is gone
     assert 0.0 <= acc_w1 <= 1.0 and 0.0 <= acc_w2 <= 1.0
+
+
+def test_learner_logs_fidelity_scalars_when_the_samples_cross_a_multiple():
+    """train.fidelity_every: the cheap fidelity evaluation's scalars appear in exactly the iterations
+    whose samples cross a multiple (4 envs x 8 steps = 32 samples per iteration, every 64)."""
+    from omegaconf import OmegaConf
+
+    from charctl.experiments.cgail.config import Config
+    from charctl.experiments.cgail.train import CgailLearner
+
+    cfg = OmegaConf.merge(
+        OmegaConf.structured(Config),
+        {
+            "use_skills": ["walk", "right_kick"],
+            "env": {"num_envs": 4, "episode_seconds": 1.0},
+            "ppo": {"hidden": [16], "minibatch_size": 32, "epochs": 1},
+            "disc": {"hidden": [16], "batch_size": 32, "steps_per_iter": 1, "replay_size": 256},
+            "train": {"rollout_steps": 8, "torch_threads": 1, "fidelity_every": 64},
+        },
+    )
+    learner = CgailLearner(cfg)
+    logged = []
+    for _ in range(4):
+        stats = learner.iterate()
+        learner.samples += learner.samples_per_iteration
+        logged.append("fidelity/min_coverage" in stats)
+    assert logged == [False, True, False, True]
+    assert 0.0 <= stats["fidelity/min_coverage"] <= 1.0
+    assert stats["fidelity/right_kick/foot_peak"] > 0.0

@@ -138,6 +138,10 @@ class TrainConfig:
     # checkpoint first finishes the pending update, so it holds every collected sample.
     # docs/cgail.md, "Throughput".
     overlap_update: bool = False
+    # samples between the cheap fidelity evaluation's scalars in TensorBoard (fidelity/<skill>/coverage, body_error,
+    # foot_peak, airborne, yaw_rate, fidelity/min_coverage; charctl.experiments.cgail.fidelity.training_fidelity,
+    # 2 episodes per skill, a few seconds each time; not in the paper: a diagnostic, on by default); 0 = off
+    fidelity_every: int = 2_000_000
 
 
 @dataclass
@@ -197,6 +201,8 @@ class Config(BaseConfig):
             return f"env.skill_fall_halflife must be > 0 episodes, got {cfg.env.skill_fall_halflife}"
         if cfg.env.skill_fall_weight > 0 and cfg.env.backend != "cpu":
             return "env.skill_fall_weight > 0 is implemented for env.backend=cpu only"
+        if cfg.train.fidelity_every < 0:
+            return "train.fidelity_every must be >= 0 samples (0 = off)"
         if cfg.train.keep_checkpoint_every < 0:
             return "train.keep_checkpoint_every must be >= 0 samples (0 = keep only last.pt)"
         if cfg.env.ramp_frames < 0:

@@ -1,4 +1,5 @@
-"""`charctl eval RUN... --dtw --confusion --switch A B --curves` for cgail (docs/cgail.md; the paper's chapter 6).
+"""`charctl eval RUN... --dtw --confusion --switch A B --curves --survival S --fidelity` for cgail (docs/cgail.md;
+the paper's chapter 6; --fidelity: charctl/experiments/cgail/fidelity.py).
 
 Every mode writes JSON (+ CSV / PNG) into the output folder (default `<first run>/eval/`) and
 appends its table to `report.md` there, with the command that produced it and the paper's
@@ -79,10 +80,17 @@ class DeviceRun(TrainedRun):
         return self.agent.model.mean_action(obs, cond).cpu().numpy().astype(np.float64)
 
     @torch.no_grad()
-    def discriminate(self, pairs: np.ndarray) -> tuple[torch.Tensor, torch.Tensor | None]:
+    def discriminate(self, pairs: np.ndarray, cond: np.ndarray) -> tuple[torch.Tensor, torch.Tensor | None]:
         """Discriminator score d (B,) and class logits (B, K) (None for AMP) of (B, 266) (o_t, o_t+1)
-        pairs, computed and left on the device."""
-        return self.agent.disc(torch.as_tensor(pairs, dtype=torch.float32, device=self.device))
+        pairs whose command blend was `cond` (B, K) (read by a per-skill style head), computed and left
+        on the device."""
+        dev = self.device
+        c = torch.as_tensor(cond, dtype=torch.float32, device=dev)
+        return self.agent.disc(torch.as_tensor(pairs, dtype=torch.float32, device=dev), cond=c)
+
+    def discriminate_for(self, pairs: np.ndarray, skill: int) -> tuple[torch.Tensor, torch.Tensor | None]:
+        """`discriminate` for pairs all commanded with `skill`."""
+        return self.discriminate(pairs, np.eye(len(self.agent.skills))[np.full(len(pairs), skill)])
 
 
 def split_eval_overrides(overrides: list[str]) -> tuple[str | None, list[str]]:
@@ -143,7 +151,7 @@ def rollout_skill(tr: DeviceRun, skill: int, episodes: int, seconds: float, seed
             rots[i].append(cur[i])
         if not alive.any():
             break
-    d, logits = tr.discriminate(np.concatenate(pairs))
+    d, logits = tr.discriminate_for(np.concatenate(pairs), skill)
 
     probs = F.softmax(logits, -1).cpu().numpy() if logits is not None else None
     r_style = style_reward(d, tr.agent.cfg.disc.objective).cpu().numpy()
@@ -219,7 +227,7 @@ def survival_rollout(tr: DeviceRun, skill: int, episodes: int, seconds: float, s
         o_t = env.obs.copy()
         res = env.step(tr.mean_action(env))
         if tr.agent.conditional:
-            _, logits = tr.discriminate(np.concatenate([o_t, res.pair_next], axis=1)[alive])
+            _, logits = tr.discriminate_for(np.concatenate([o_t, res.pair_next], axis=1)[alive], skill)
             hits += (logits.argmax(-1) == skill).sum()
             total += int(alive.sum())
         alive &= ~res.terminated
@@ -270,7 +278,7 @@ def eval_confusion(tr: DeviceRun, episodes: int, out: Path, seed: int = 99) -> d
     data = np.zeros((K, K))
     with torch.no_grad():
         for k, p in enumerate(tr.agent.demos.pairs):
-            _, logits = tr.discriminate(p)
+            _, logits = tr.discriminate_for(p, k)
             data[k] = F.softmax(logits, -1).mean(0).cpu().numpy()
     result = {
         "skills": tr.skill_names,
@@ -347,9 +355,9 @@ def eval_switch(
                 env.forced_command = np.full(trials, kb)
                 alive_at_switch = alive.copy()
             o_t = env.obs.copy()
-            cmd_a, cmd_b, w = env.prev_cmd.copy(), env.cmd.copy(), env.w.copy()
+            cmd_a, cmd_b, w, blend = env.prev_cmd.copy(), env.cmd.copy(), env.w.copy(), env.command_blend()
             res = env.step(tr.mean_action(env))
-            d, logits = tr.discriminate(np.concatenate([o_t, res.pair_next], axis=1))
+            d, logits = tr.discriminate(np.concatenate([o_t, res.pair_next], axis=1), blend)
             p = F.softmax(logits, -1)
             r_c = blended_class_reward(
                 p,
@@ -500,9 +508,13 @@ def _smooth(v: np.ndarray, k: int = 5) -> np.ndarray:
 
 # ---------------------------------------------------------------------------- entry point
 def evaluate(targets: list[str], options: dict, overrides: list[str]) -> None:
-    """The modes given in `options` (--dtw, --confusion, --switch, --curves, --survival) over the runs."""
+    """The modes given in `options` (--dtw, --confusion, --switch, --curves, --survival, --fidelity) over the runs."""
     device, overrides = split_eval_overrides(overrides)
     run_dirs = resolve_run_dirs(targets, overrides, "eval")
+    if options.get("fidelity"):
+        from charctl.experiments.cgail.fidelity import check_can_render
+
+        check_can_render()  # the filmstrips: a machine that cannot render says so before anything is written
     checkpoint = options.get("checkpoint")
     default_out = (
         run_dirs[0] / "eval" / Path(checkpoint_file_name(checkpoint)).stem if checkpoint else run_dirs[0] / "eval"
@@ -521,7 +533,7 @@ def evaluate(targets: list[str], options: dict, overrides: list[str]) -> None:
     episodes = int(options.get("episodes") or 4)
     if options.get("curves"):
         eval_curves(run_dirs, out)
-    needs_policy = options.get("dtw") or options.get("confusion") or options.get("switch") or options.get("survival")
+    needs_policy = any(options.get(m) for m in ("dtw", "confusion", "switch", "survival", "fidelity"))
     if not needs_policy:
         return
     runs = [load_eval_run(d, device, checkpoint) for d in run_dirs]
@@ -536,6 +548,10 @@ def evaluate(targets: list[str], options: dict, overrides: list[str]) -> None:
                 break
         else:
             raise CharctlError("--confusion needs a conditional (cGAIL) run")
+    if options.get("fidelity"):
+        from charctl.experiments.cgail.fidelity import eval_fidelity
+
+        eval_fidelity(runs, episodes, out)
     if options.get("switch"):
         a, b = options["switch"]
         tr = next((t for t in runs if t.agent.conditional), None)

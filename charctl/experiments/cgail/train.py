@@ -34,7 +34,7 @@ from charctl.experiments.cgail.discriminator import (
 from charctl.experiments.cgail.env import CgailEnv
 from charctl.experiments.cgail.skills import DemoPairs, load_skills, select_skills
 from charctl.rl.ppo import PPO, ActorCritic, make_adam
-from charctl.rl.runner import AgentCounters
+from charctl.rl.runner import AgentCounters, crossed_multiple
 from charctl.rl.storage import RolloutStorage
 
 
@@ -510,10 +510,19 @@ class CgailLearner(AgentCounters):
         return [self.agent.model, self.agent.disc]
 
     def iterate(self) -> dict[str, float]:
-        """One iteration: rollout, rewards, PPO and discriminator updates (in turn), or, with
-        train.overlap_update, this rollout beside the previous rollout's updates (`_iterate_overlapped`)."""
-        if self.overlap:
-            return self._iterate_overlapped()
+        """One iteration (`_iterate_in_turn` or, with train.overlap_update, `_iterate_overlapped`), plus the
+        cheap fidelity scalars each time the samples cross a multiple of train.fidelity_every (no update
+        is running then, so the policy is not changing under the evaluation)."""
+        stats = self._iterate_overlapped() if self.overlap else self._iterate_in_turn()
+        every, step = int(self.cfg.train.fidelity_every), self.samples_per_iteration
+        if crossed_multiple(self.agent.samples + step, step, every):
+            from charctl.experiments.cgail.fidelity import training_fidelity
+
+            stats.update(training_fidelity(self.agent, seed=self.agent.iteration))
+        return stats
+
+    def _iterate_in_turn(self) -> dict[str, float]:
+        """Rollout, rewards, PPO and discriminator updates, one after another."""
         t0 = time.perf_counter()
         ro = self._rollout(self.agent)
         t1 = time.perf_counter()
