@@ -157,3 +157,23 @@ def test_learner_logs_fidelity_scalars_when_the_samples_cross_a_multiple():
     assert logged == [False, True, False, True]
     assert 0.0 <= stats["fidelity/min_coverage"] <= 1.0
     assert stats["fidelity/right_kick/foot_peak"] > 0.0
+
+
+@pytest.mark.parametrize(
+    "options",
+    [
+        {"survival": 1.0, "switch": ("walk", "nosuch")},
+        {"dtw": True, "switch": ("nosuch", "walk")},
+        {"survival": 1.0, "episodes": 0},
+    ],
+)
+def test_eval_with_a_bad_mode_argument_writes_nothing(tmp_path, options):
+    """Every mode's arguments are checked before the first mode writes its table (an unknown --switch
+    skill used to fail after --survival had written report.md)."""
+    from charctl.errors import CharctlError
+    from charctl.experiments.cgail.evaluate import evaluate
+
+    out = tmp_path / "eval"
+    with pytest.raises(CharctlError, match="unknown skill|-k must be"):
+        evaluate(["pretrained/cgail-3skill"], {**options, "out": str(out)}, [])
+    assert not out.exists()

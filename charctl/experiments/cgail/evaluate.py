@@ -520,6 +520,12 @@ def evaluate(targets: list[str], options: dict, overrides: list[str]) -> None:
         run_dirs[0] / "eval" / Path(checkpoint_file_name(checkpoint)).stem if checkpoint else run_dirs[0] / "eval"
     )
     out = Path(options.get("out") or default_out)
+    episodes = int(options["episodes"]) if options.get("episodes") is not None else 4
+    if episodes < 1:
+        raise CharctlError(f"-k must be >= 1 episode, got {episodes}")
+    needs_policy = any(options.get(m) for m in ("dtw", "confusion", "switch", "survival", "fidelity"))
+    runs = [load_eval_run(d, device, checkpoint) for d in run_dirs] if needs_policy else []
+    switch_run = check_mode_arguments(runs, options)  # every argument checked before anything is written
     out.mkdir(parents=True, exist_ok=True)
     _append_report(
         out,
@@ -530,35 +536,38 @@ def evaluate(targets: list[str], options: dict, overrides: list[str]) -> None:
         if sys.argv and sys.argv[0].endswith("charctl")
         else None,
     )
-    episodes = int(options.get("episodes") or 4)
     if options.get("curves"):
         eval_curves(run_dirs, out)
-    needs_policy = any(options.get(m) for m in ("dtw", "confusion", "switch", "survival", "fidelity"))
-    if not needs_policy:
-        return
-    runs = [load_eval_run(d, device, checkpoint) for d in run_dirs]
     if options.get("survival"):
-        eval_survival(runs, max(episodes, 1), float(options["survival"]), out)
+        eval_survival(runs, episodes, float(options["survival"]), out)
     if options.get("dtw"):
         eval_dtw(runs, episodes, out)
     if options.get("confusion"):
-        for tr in runs:
-            if tr.agent.conditional:
-                eval_confusion(tr, episodes, out)
-                break
-        else:
-            raise CharctlError("--confusion needs a conditional (cGAIL) run")
+        eval_confusion(next(t for t in runs if t.agent.conditional), episodes, out)
     if options.get("fidelity"):
         from charctl.experiments.cgail.fidelity import eval_fidelity
 
         eval_fidelity(runs, episodes, out)
-    if options.get("switch"):
+    if switch_run is not None:
         a, b = options["switch"]
-        tr = next((t for t in runs if t.agent.conditional), None)
-        if tr is None:
-            raise CharctlError("--switch needs a conditional (cGAIL) run")
-        eval_switch(tr, a, b, max(episodes, 2), out)
+        eval_switch(switch_run, a, b, max(episodes, 2), out)
     print(f"results in {out}/ (report.md)")
+
+
+def check_mode_arguments(runs: list[DeviceRun], options: dict) -> DeviceRun | None:
+    """One-line CharctlError for a mode the loaded runs cannot serve (--confusion / --switch without a
+    conditional run, a --switch skill a run does not have), before any output is written. Returns the
+    run --switch studies (the first conditional one), or None without --switch."""
+    conditional = next((t for t in runs if t.agent.conditional), None)
+    if options.get("confusion") and conditional is None:
+        raise CharctlError("--confusion needs a conditional (cGAIL) run")
+    if not options.get("switch"):
+        return None
+    if conditional is None:
+        raise CharctlError("--switch needs a conditional (cGAIL) run")
+    for name in options["switch"]:
+        conditional.skill_index(name)
+    return conditional
 
 
 # ---------------------------------------------------------------------------- output helpers
