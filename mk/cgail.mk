@@ -13,6 +13,11 @@ CGAIL_INTURN := train.overlap_update=false
 # The settings repro-cgail-small trains with; repro-cgail-current empties it to train at the current preset.
 CGAIL_SHIPPED := $(CGAIL_300HZ) $(CGAIL_FP32) $(CGAIL_INTURN)
 
+# The policy `make demo` shows, and its command schedule (seconds): each skill held 4-5 s, so the kick
+# (a 1.5-s clip) is done after the 60-frame (2-s) command ramp ends.
+CGAIL_DEMO_POLICY := pretrained/cgail-3skill
+CGAIL_DEMO_SCHEDULE := walk:0,run:4,right_kick:8
+
 .PHONY: repro-cgail-small repro-cgail-current repro-cgail-10skill repro-cgail-10skill-temperature repro-cgail-10skill-kl repro-cgail-paper demo-cgail
 
 repro-cgail-10skill: install ## cgail: the shipped ten-skill run (pretrained/README.md; ~2.3 h on 2 cores), every kept checkpoint evaluated, one picked
@@ -56,7 +61,7 @@ repro-cgail-paper: install ## cgail: the paper's runs (10 skills, AMP, LS ablati
 	$(CHARCTL) eval $$C $$A $$L $(CGAIL_PAPER)/skills/cgail/*/ --curves -o $(CGAIL_PAPER)
 	@echo "report: $(CGAIL_PAPER)/report.md"
 
-demo-cgail: install ## cgail: a short training run (~2 min), then the shipped 3-skill policy evaluated and rendered switching walk -> run -> right_kick
+demo-cgail: install ## cgail: a short training run (~2 min), then the shipped 3-skill policy evaluated (survival, confusion, fidelity with filmstrips) and rendered switching walk -> run -> right_kick
 	$(CHARCTL) train cgail scale=small train.total_samples=100000 output_root=outputs/demo
-	$(CHARCTL) eval pretrained/cgail-3skill --survival 5 --confusion -k 4 -o outputs/demo/eval
-	$(CHARCTL) export pretrained/cgail-3skill --video outputs/demo/cgail_switch.mp4 --commands "walk:0,run:3,right_kick:6" --seconds 8
+	$(CHARCTL) eval $(CGAIL_DEMO_POLICY) --survival 5 --confusion --fidelity -k 2 -o outputs/demo/eval
+	$(CHARCTL) export $(CGAIL_DEMO_POLICY) --video outputs/demo/cgail_switch.mp4 --commands "$(CGAIL_DEMO_SCHEDULE)" --seconds 13

@@ -177,3 +177,51 @@ def test_eval_with_a_bad_mode_argument_writes_nothing(tmp_path, options):
     with pytest.raises(CharctlError, match="unknown skill|-k must be"):
         evaluate(["pretrained/cgail-3skill"], {**options, "out": str(out)}, [])
     assert not out.exists()
+
+
+def test_low_style_termination_counts_consecutive_low_steps_and_restarts_on_done():
+    """r_S < threshold for `steps` steps in a row ends the episode; a done episode or a good step
+    restarts the count (threshold 0.999 makes every step low for an untrained discriminator)."""
+    from charctl.experiments.cgail.termination import LowStyleTermination
+
+    disc = Discriminator(6, 2, [8], style_head="per_skill")
+    term = LowStyleTermination(disc, num_envs=3, threshold=0.999, steps=3, objective="lsgan")
+    pairs, cond = torch.randn(3, 6), torch.eye(2)[[0, 1, 0]]
+    no = torch.zeros(3, dtype=torch.bool)
+    assert not term.update(pairs, cond, no).any()
+    assert not term.update(pairs, cond, torch.tensor([True, False, False])).any()  # env 0 restarts
+    assert term.update(pairs, cond, no).tolist() == [False, True, True]  # envs 1, 2: third low step
+    assert term.low.tolist() == [1, 0, 0]  # env 0: counted again from its restart
+    never = LowStyleTermination(disc, num_envs=3, threshold=1e-9, steps=1, objective="lsgan")
+    d, _ = never.disc(pairs, cond=cond)
+    ended = never.update(pairs, cond, no)
+    assert ended.tolist() == (style_reward_of(d) < 1e-9).tolist()
+
+
+def style_reward_of(d):
+    from charctl.experiments.cgail.discriminator import style_reward
+
+    return style_reward(d, "lsgan")
+
+
+def test_learner_with_low_style_termination_ends_episodes_and_logs_them():
+    from omegaconf import OmegaConf
+
+    from charctl.experiments.cgail.config import Config
+    from charctl.experiments.cgail.train import CgailLearner
+
+    cfg = OmegaConf.merge(
+        OmegaConf.structured(Config),
+        {
+            "use_skills": ["walk", "right_kick"],
+            "env": {"num_envs": 4, "episode_seconds": 5.0},
+            "ppo": {"hidden": [16], "minibatch_size": 32, "epochs": 1},
+            "disc": {"hidden": [16], "batch_size": 32, "steps_per_iter": 1, "replay_size": 256},
+            "reward": {"low_style_threshold": 0.999, "low_style_steps": 2},
+            "train": {"rollout_steps": 8, "torch_threads": 1, "fidelity_every": 0},
+        },
+    )
+    stats = CgailLearner(cfg).iterate()
+    # every step is "low" at threshold 0.999: episodes end every 2 steps unless they fell first
+    assert stats["train/style_terminations"] >= 4 * 8 // 2 - 4 - stats["train/falls"]
+    assert stats["train/episode_length"] <= 2.0

@@ -82,6 +82,11 @@ class RewardConfig:
     # r_C: l1 (eq 4.8, zero until P(command) > 0.5) | prob (dense: P(command)) | logratio (log(K P(command)), >= -1)
     class_form: str = "l1"
     kind: str = "adversarial"  # adversarial (eq 4.1) | tracking (DeepMimic-style baseline: phase in the state)
+    # Early termination on a low style reward (ProtoMotions AMP, against the stand-still optimum): an episode ends
+    # when r_S of its pairs, scored for its command, stayed below this for low_style_steps control steps in a row.
+    # 0 = off (the paper). CPU env only. charctl.experiments.cgail.termination; docs/cgail.md, "Fidelity recipe".
+    low_style_threshold: float = 0.0
+    low_style_steps: int = 10
 
 
 @dataclass
@@ -175,6 +180,10 @@ class Config(BaseConfig):
             return f"reward.class_form must be 'l1', 'prob' or 'logratio', got {cfg.reward.class_form!r}"
         if cfg.disc.objective not in ("lsgan", "bce"):
             return f"disc.objective must be 'lsgan' or 'bce', got {cfg.disc.objective!r}"
+        if not 0.0 <= cfg.reward.low_style_threshold < 1.0 or cfg.reward.low_style_steps < 1:
+            return "reward.low_style_threshold must lie in [0, 1) and reward.low_style_steps be >= 1"
+        if cfg.reward.low_style_threshold > 0 and (cfg.env.backend != "cpu" or cfg.reward.kind != "adversarial"):
+            return "reward.low_style_threshold > 0 needs env.backend=cpu and reward.kind=adversarial"
         if cfg.disc.style_head not in ("shared", "per_skill"):
             return f"disc.style_head must be 'shared' or 'per_skill', got {cfg.disc.style_head!r}"
         if cfg.disc.style_head == "per_skill" and not cfg.cgail.conditional:

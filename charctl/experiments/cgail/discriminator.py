@@ -92,7 +92,9 @@ def style_loss(d_data: torch.Tensor, d_policy: torch.Tensor, kind: str = "lsgan"
     raise ValueError(f"unknown style loss {kind!r}")
 
 
-def wrong_skill_labels(labels: torch.Tensor, num_classes: int, generator: torch.Generator | None = None) -> torch.Tensor:
+def wrong_skill_labels(
+    labels: torch.Tensor, num_classes: int, generator: torch.Generator | None = None
+) -> torch.Tensor:
     """(B,) a skill other than each of `labels`, uniformly (CALM's negatives: a demonstration pair scored
     for a skill it does not belong to is a fake for that skill's style logit). Needs num_classes >= 2."""
     shift = torch.randint(1, num_classes, labels.shape, generator=generator).to(labels.device)

@@ -33,6 +33,7 @@ from charctl.experiments.cgail.discriminator import (
 )
 from charctl.experiments.cgail.env import CgailEnv
 from charctl.experiments.cgail.skills import DemoPairs, load_skills, select_skills
+from charctl.experiments.cgail.termination import LowStyleTermination
 from charctl.rl.ppo import PPO, ActorCritic, make_adam
 from charctl.rl.runner import AgentCounters, crossed_multiple
 from charctl.rl.storage import RolloutStorage
@@ -185,9 +186,16 @@ class Rollout:
     episode_lengths: list
     unstable: int
     falls: int
+    style_ends: int = 0  # episodes ended by a low style reward (reward.low_style_threshold)
 
 
-def collect_rollout(agent: Agent, env: CgailEnv, steps: int, deterministic: bool = False) -> Rollout:
+def collect_rollout(
+    agent: Agent,
+    env: CgailEnv,
+    steps: int,
+    deterministic: bool = False,
+    terminate: LowStyleTermination | None = None,
+) -> Rollout:
     """Step all envs `steps` times with one batched policy forward per step.
 
     The per-step policy forward is small (num_envs rows): it runs on one torch thread, which
@@ -199,12 +207,14 @@ def collect_rollout(agent: Agent, env: CgailEnv, steps: int, deterministic: bool
     try:
         if getattr(env, "on_device", False):  # env.backend=warp: everything stays on the device
             return _collect_rollout_device(agent, env, steps, deterministic)
-        return _collect_rollout(agent, env, steps, deterministic)
+        return _collect_rollout(agent, env, steps, deterministic, terminate)
     finally:
         torch.set_num_threads(threads)
 
 
-def _collect_rollout(agent: Agent, env: CgailEnv, steps: int, deterministic: bool) -> Rollout:
+def _collect_rollout(
+    agent: Agent, env: CgailEnv, steps: int, deterministic: bool, terminate: LowStyleTermination | None = None
+) -> Rollout:
     N, K = env.N, agent.num_skills
     dev = torch.device(agent.device)  # the CPU env's numpy arrays go to the learner's device (no-op on the CPU)
     storage = RolloutStorage(steps, N, env.state_dim, 28, K if agent.conditional else 0, device=dev)
@@ -217,7 +227,7 @@ def _collect_rollout(agent: Agent, env: CgailEnv, steps: int, deterministic: boo
     r_track = torch.zeros(steps, N, device=dev)
     bootstrap = torch.zeros(steps, N, device=dev)
     lengths = []
-    unstable = falls = 0
+    unstable = falls = style_ends = 0
     for t in range(steps):
         obs = torch.as_tensor(env.state, dtype=torch.float32, device=dev)
         blend = torch.as_tensor(env.command_blend(), dtype=torch.float32, device=dev)
@@ -236,6 +246,12 @@ def _collect_rollout(agent: Agent, env: CgailEnv, steps: int, deterministic: boo
         r_goal[t] = torch.from_numpy(res.r_goal)
         r_track[t] = torch.from_numpy(res.r_track)
         done = res.terminated | res.truncated
+        if terminate is not None:  # episodes whose style reward stayed low end here (no bootstrap)
+            ended = terminate.update(pairs[t], blend, torch.from_numpy(done).to(dev)).cpu().numpy()
+            if ended.any():
+                env.reset(np.flatnonzero(ended))
+                done = done | ended
+                style_ends += int(ended.sum())
         if res.truncated.any():
             idx = np.flatnonzero(res.truncated)
             fs = torch.as_tensor(res.final_state[idx], dtype=torch.float32, device=dev)
@@ -254,7 +270,9 @@ def _collect_rollout(agent: Agent, env: CgailEnv, steps: int, deterministic: boo
         lengths += list(steps_before[done] + 1)
         unstable += int(res.unstable.sum())
         falls += int((res.terminated & ~res.unstable).sum())
-    return Rollout(storage, pairs, cond_all, cmd_a, cmd_b, w, r_goal, r_track, bootstrap, lengths, unstable, falls)
+    return Rollout(
+        storage, pairs, cond_all, cmd_a, cmd_b, w, r_goal, r_track, bootstrap, lengths, unstable, falls, style_ends
+    )
 
 
 def _collect_rollout_device(agent: Agent, env, steps: int, deterministic: bool) -> Rollout:
@@ -490,6 +508,14 @@ class CgailLearner(AgentCounters):
         # worker thread updates self.agent.model; `pending` is the rollout the next update consumes
         self.acting = dataclasses.replace(self.agent, model=copy.deepcopy(self.agent.model)) if self.overlap else None
         self.pending: Rollout | None = None
+        rc = cfg.reward
+        self.terminate = (
+            LowStyleTermination(
+                self.agent.disc, self.env.N, rc.low_style_threshold, rc.low_style_steps, cfg.disc.objective
+            )
+            if rc.low_style_threshold > 0
+            else None
+        )
 
     def state_dict(self) -> dict:
         """Checkpoint state. With the overlapped loop the pending rollout's updates are run first, so
@@ -523,6 +549,8 @@ class CgailLearner(AgentCounters):
 
     def _iterate_in_turn(self) -> dict[str, float]:
         """Rollout, rewards, PPO and discriminator updates, one after another."""
+        if self.terminate is not None:
+            self.terminate.sync(self.agent.disc)
         t0 = time.perf_counter()
         ro = self._rollout(self.agent)
         t1 = time.perf_counter()
@@ -546,6 +574,8 @@ class CgailLearner(AgentCounters):
         MuJoCo and torch release the GIL in their kernels, so the two share the cores; the rollout's
         rewards use the discriminator after the worker's update."""
         self.acting.model.load_state_dict(self.agent.model.state_dict())
+        if self.terminate is not None:  # before the worker starts updating the discriminator
+            self.terminate.sync(self.agent.disc)
         pending, self.pending = self.pending, None
         result: dict = {}
         worker = None
@@ -580,7 +610,7 @@ class CgailLearner(AgentCounters):
     def _rollout(self, actor: Agent) -> Rollout:
         """`train.rollout_steps` control steps of every env, acting with `actor`'s policy."""
         self.env.max_steps = episode_limit_steps(self.cfg.env, self.agent.samples)
-        return collect_rollout(actor, self.env, self.cfg.train.rollout_steps)
+        return collect_rollout(actor, self.env, self.cfg.train.rollout_steps, terminate=self.terminate)
 
     def _rewards(self, ro: Rollout) -> tuple[dict[str, torch.Tensor], torch.Tensor]:
         """Discriminator rewards and the total reward of `ro`, written into its storage with the returns
@@ -633,6 +663,7 @@ class CgailLearner(AgentCounters):
             "train/episode_limit": float(env.max_steps),
             "train/unstable_resets_total": float(agent.unstable_total),
             "train/falls": float(ro.falls),
+            "train/style_terminations": float(ro.style_ends),
             "train/unstable_rate": float(ro.unstable) / n,
             "sim/unstable_resets": float(ro.unstable),
         }
