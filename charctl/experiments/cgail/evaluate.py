@@ -13,7 +13,6 @@ tables stay on the host, and only actions, probabilities and rewards come back f
 from __future__ import annotations
 
 import csv
-import json
 import shlex
 import sys
 import warnings
@@ -27,6 +26,7 @@ import torch.nn.functional as F
 from charctl.errors import CharctlError
 from charctl.eval.dtw import dtw_align
 from charctl.eval.pose import pose_error_matrix
+from charctl.eval.report import append_report, fmt_cell, markdown_table, print_table, write_json
 from charctl.experiments.cgail.discriminator import blended_class_reward, style_reward
 from charctl.experiments.cgail.policy import (
     TrainedRun,
@@ -201,15 +201,15 @@ def eval_dtw(runs: list[DeviceRun], episodes: int, out: Path) -> dict:
         "runs": {tr.label: str(tr.run_dir) for tr in runs},
         "metric": "mean per-frame e_pose (radians, l2 over the 12 joints) along the DTW path, RSI at frame 0",
     }
-    _write_json(out / "dtw.json", result)
+    write_json(out / "dtw.json", result)
     cols = sorted({c for row in table.values() for c in row}, key=_column_order)
     with open(out / "dtw.csv", "w", newline="") as fh:
         w = csv.writer(fh)
         w.writerow(["skill", *cols])
         for s, row in table.items():
-            w.writerow([s, *[_fmt(row.get(c)) for c in cols]])
-    _print_table("Table 6.1: DTW pose error per skill (lower is better)", table, cols)
-    _append_report(out, "Table 6.1 — DTW pose error per skill", _markdown_table(table, cols), result["metric"])
+            w.writerow([s, *[fmt_cell(row.get(c)) for c in cols]])
+    print_table("Table 6.1: DTW pose error per skill (lower is better)", table, cols)
+    append_report(out, "Table 6.1 — DTW pose error per skill", markdown_table(table, cols), result["metric"])
     return result
 
 
@@ -257,11 +257,11 @@ def eval_survival(runs: list[DeviceRun], episodes: int, seconds: float, out: Pat
         "metric": "no-fall: share of episodes without a non-foot ground contact (RSI at random frames and "
         "headings, mean actions); class acc: classifier argmax == command on the policy's pairs",
     }
-    _write_json(out / "survival.json", result)
+    write_json(out / "survival.json", result)
     cols = sorted({c for row in table.values() for c in row})
-    _print_table(f"Survival over {seconds:g}-s episodes ({episodes} per skill)", table, cols)
-    _append_report(
-        out, f"Survival — {seconds:g}-s episodes, {episodes} per skill", _markdown_table(table, cols), result["metric"]
+    print_table(f"Survival over {seconds:g}-s episodes ({episodes} per skill)", table, cols)
+    append_report(
+        out, f"Survival — {seconds:g}-s episodes, {episodes} per skill", markdown_table(table, cols), result["metric"]
     )
     return result
 
@@ -288,7 +288,7 @@ def eval_confusion(tr: DeviceRun, episodes: int, out: Path, seed: int = 99) -> d
         "data_diagonal": np.diag(data).tolist(),
         "run": str(tr.run_dir),
     }
-    _write_json(out / "confusion.json", result)
+    write_json(out / "confusion.json", result)
     from charctl.viz.plots import new_figure, save_figure
 
     fig, axes = new_figure(1, 2, figsize=(4 + 1.1 * K, 2.2 + 0.5 * K))
@@ -312,11 +312,11 @@ def eval_confusion(tr: DeviceRun, episodes: int, out: Path, seed: int = 99) -> d
     fig.colorbar(im, ax=axes, shrink=0.8)
     save_figure(fig, out / "confusion.png")
     rows = {s: {"policy P(correct)": policy[k, k], "data P(correct)": data[k, k]} for k, s in enumerate(tr.skill_names)}
-    _print_table("Fig 6.8: classifier confusion (diagonal)", rows, ["policy P(correct)", "data P(correct)"])
-    _append_report(
+    print_table("Fig 6.8: classifier confusion (diagonal)", rows, ["policy P(correct)", "data P(correct)"])
+    append_report(
         out,
         "Fig 6.8 — classifier confusion diagonal",
-        _markdown_table(rows, ["policy P(correct)", "data P(correct)"]) + "\n\n![confusion](confusion.png)",
+        markdown_table(rows, ["policy P(correct)", "data P(correct)"]) + "\n\n![confusion](confusion.png)",
         "rows: commanded skill (policy) or clip label (data); entries: mean softmax probability; rows sum to 1",
     )
     return result
@@ -404,7 +404,7 @@ def eval_switch(
         "run": str(tr.run_dir),
         "curves": {n: {k: v.tolist() for k, v in c.items()} for n, c in curves.items()},
     }
-    _write_json(out / f"switch_{a}_to_{b}.json", result)
+    write_json(out / f"switch_{a}_to_{b}.json", result)
     rows = {
         n: {
             "latency (frames, P(B)>0.5)": s["latency_frames_mean"],
@@ -416,11 +416,11 @@ def eval_switch(
         for n, s in summary.items()
     }
     cols = ["latency (frames, P(B)>0.5)", "never switched", "falls", "alive at switch", "trials"]
-    _print_table(f"Fig 6.10/6.11: switch {a} -> {b}", rows, cols)
-    _append_report(
+    print_table(f"Fig 6.10/6.11: switch {a} -> {b}", rows, cols)
+    append_report(
         out,
         f"Fig 6.10/6.11 — command switch {a} → {b}",
-        _markdown_table(rows, cols) + f"\n\n![switch](switch_{a}_to_{b}.png)",
+        markdown_table(rows, cols) + f"\n\n![switch](switch_{a}_to_{b}.png)",
         f"switch at frame {t_switch} ({before_s:.1f} s); ramp = {ramp_frames} frames linear "
         f"(eq 4.10); each trial watched until frame {t_end} ({after_s:.1f} s after the ramp ends); "
         f"latency = frames after the switch until the classifier's P({b}) > 0.5",
@@ -493,7 +493,7 @@ def eval_curves(run_dirs: list[Path], out: Path) -> dict:
             ax.legend(fontsize=7)
         save_figure(fig, out / fname)
         written.append(fname)
-    _append_report(
+    append_report(
         out, "Training curves", "\n".join(f"![{f}]({f})" for f in written), "runs: " + ", ".join(r[0] for r in runs)
     )
     print(f"wrote {len(written)} figures to {out}")
@@ -527,7 +527,7 @@ def evaluate(targets: list[str], options: dict, overrides: list[str]) -> None:
     runs = [load_eval_run(d, device, checkpoint) for d in run_dirs] if needs_policy else []
     switch_run = check_mode_arguments(runs, options)  # every argument checked before anything is written
     out.mkdir(parents=True, exist_ok=True)
-    _append_report(
+    append_report(
         out,
         None,
         None,
@@ -575,52 +575,3 @@ def _column_order(c: str) -> tuple:
     order = ["cGAIL", "cGAIL-LS", "AMP", "paper cGAIL", "paper AMP"]
     base = c.replace(" falls", "")
     return (order.index(base) if base in order else 9, c.endswith("falls"), c)
-
-
-def _fmt(v) -> str:
-    if v is None:
-        return "-"
-    if isinstance(v, float):
-        return "nan" if np.isnan(v) else f"{v:.3f}"
-    return str(v)
-
-
-def _markdown_table(rows: dict, cols: list[str]) -> str:
-    lines = ["| | " + " | ".join(cols) + " |", "|---|" + "---|" * len(cols)]
-    for name, row in rows.items():
-        lines.append(f"| {name} | " + " | ".join(_fmt(row.get(c)) for c in cols) + " |")
-    return "\n".join(lines)
-
-
-def _print_table(title: str, rows: dict, cols: list[str]) -> None:
-    from rich.console import Console
-    from rich.table import Table
-
-    t = Table(title=title)
-    t.add_column("")
-    for c in cols:
-        t.add_column(c, justify="right")
-    for name, row in rows.items():
-        t.add_row(name, *[_fmt(row.get(c)) for c in cols])
-    Console().print(t)
-
-
-def _write_json(path: Path, obj) -> None:
-    from charctl.runs import _jsonable, atomic_write_text
-
-    atomic_write_text(path, json.dumps(_jsonable(obj), indent=2))
-
-
-def _append_report(
-    out: Path, title: str | None, body: str | None, note: str | None, command: str | None = None
-) -> None:
-    path = out / "report.md"
-    if not path.exists():
-        path.write_text("# cgail evaluation report\n\nPaper values: Table 6.1 (docs/cgail.md). Produced by charctl.\n")
-    with open(path, "a") as fh:
-        if command:
-            fh.write(f"\n`{command}`\n")
-        if title:
-            fh.write(f"\n## {title}\n\n{body}\n")
-            if note:
-                fh.write(f"\n_{note}_\n")

@@ -104,14 +104,10 @@ class Recording:
 
 
 def _agent(agent_or_run):
-    """The Agent behind an Agent, a (Device)TrainedRun or a run directory (loaded on its configured device)."""
-    from charctl.experiments.cgail.policy import TrainedRun
-
-    if isinstance(agent_or_run, (str, Path)):
-        from charctl.experiments.cgail.evaluate import load_eval_run
-
-        agent_or_run = load_eval_run(agent_or_run)
-    return agent_or_run.agent if isinstance(agent_or_run, TrainedRun) else agent_or_run
+    """The Agent behind an Agent or a loaded (Device)TrainedRun (its `.agent`). Loading a run directory is
+    the caller's (evaluate.load_eval_run): this module is imported by the training loop, so it imports no
+    loader (no cycle train -> fidelity -> policy -> train)."""
+    return getattr(agent_or_run, "agent", agent_or_run)
 
 
 def _make_env(agent, num_envs: int, seed: int, episode_seconds: float):
@@ -247,7 +243,7 @@ def check_can_render() -> None:
 def eval_fidelity(runs: list, episodes: int, out: Path, seed: int = 2468, filmstrips: bool = True) -> dict:
     """`charctl eval RUN... --fidelity [-k N]`: per run and skill, fidelity.json, a table in report.md
     and (with `filmstrips`) fidelity_<skill>.png (fidelity_<run>_<skill>.png for several runs)."""
-    from charctl.experiments.cgail.evaluate import _append_report, _markdown_table, _print_table, _write_json
+    from charctl.eval.report import append_report, markdown_table, print_table, write_json
 
     labels = [tr.label for tr in runs]
     several = len(runs) > 1
@@ -284,13 +280,13 @@ def eval_fidelity(runs: list, episodes: int, out: Path, seed: int = 2468, filmst
         "airborne_margin_m": AIRBORNE_MARGIN,
         "metric": METRIC_NOTE,
     }
-    _write_json(out / "fidelity.json", result)
+    write_json(out / "fidelity.json", result)
     cols = list(next(iter(rows.values())))
-    _print_table(f"Fidelity per skill ({episodes} episodes each; cells policy / clip)", rows, cols)
-    body = _markdown_table(rows, cols)
+    print_table(f"Fidelity per skill ({episodes} episodes each; cells policy / clip)", rows, cols)
+    body = markdown_table(rows, cols)
     if written:
         body += "\n\n" + "\n".join(f"![{k}]({f})" for k, f in written)
-    _append_report(out, f"Fidelity — {episodes} episodes per skill", body, METRIC_NOTE)
+    append_report(out, f"Fidelity — {episodes} episodes per skill", body, METRIC_NOTE)
     return result
 
 

@@ -1,0 +1,71 @@
+"""Evaluation output shared by the experiments: tables (terminal and Markdown), JSON, and a report.md
+that each evaluation mode appends its table to."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+REPORT_HEADER = "# cgail evaluation report\n\nPaper values: Table 6.1 (docs/cgail.md). Produced by charctl.\n"
+
+
+def fmt_cell(v) -> str:
+    """A table cell: '-' for None, 3 decimals for floats ('nan' kept), str() otherwise."""
+    if v is None:
+        return "-"
+    if isinstance(v, float):
+        return "nan" if np.isnan(v) else f"{v:.3f}"
+    return str(v)
+
+
+def markdown_table(rows: dict, cols: list[str]) -> str:
+    """rows: name -> {column: value}; one Markdown row per name, the columns in `cols` order."""
+    lines = ["| | " + " | ".join(cols) + " |", "|---|" + "---|" * len(cols)]
+    for name, row in rows.items():
+        lines.append(f"| {name} | " + " | ".join(fmt_cell(row.get(c)) for c in cols) + " |")
+    return "\n".join(lines)
+
+
+def print_table(title: str, rows: dict, cols: list[str]) -> None:
+    """The same table on the terminal (rich)."""
+    from rich.console import Console
+    from rich.table import Table
+
+    t = Table(title=title)
+    t.add_column("")
+    for c in cols:
+        t.add_column(c, justify="right")
+    for name, row in rows.items():
+        t.add_row(name, *[fmt_cell(row.get(c)) for c in cols])
+    Console().print(t)
+
+
+def write_json(path: Path, obj) -> None:
+    """`obj` as indented JSON (numpy values converted), written atomically."""
+    from charctl.runs import _jsonable, atomic_write_text
+
+    atomic_write_text(path, json.dumps(_jsonable(obj), indent=2))
+
+
+def append_report(
+    out: Path,
+    title: str | None,
+    body: str | None,
+    note: str | None,
+    command: str | None = None,
+    header: str = REPORT_HEADER,
+) -> None:
+    """Append to out/report.md (created with `header`): the command line, then `## title`, the body and
+    the note in italics."""
+    path = out / "report.md"
+    if not path.exists():
+        path.write_text(header)
+    with open(path, "a") as fh:
+        if command:
+            fh.write(f"\n`{command}`\n")
+        if title:
+            fh.write(f"\n## {title}\n\n{body}\n")
+            if note:
+                fh.write(f"\n_{note}_\n")
