@@ -33,6 +33,12 @@ EXPERIMENT = Experiment(
         Option(
             "survival", "share of SECONDS-long episodes without a fall, per skill", float, mode=True, metavar="SECONDS"
         ),
+        Option(
+            "fidelity",
+            "per skill against its clip: DTW body-position error, pose coverage, foot/hand peaks, airborne share, "
+            "speed, yaw rate, filmstrip",
+            mode=True,
+        ),
         EPISODES,
         OUT,
         CHECKPOINT,
@@ -45,6 +51,13 @@ EXPERIMENT = Experiment(
         Option("commands", 'command schedule, e.g. "walk:0,run:3,kick:6" (seconds)', str),
         SECONDS,
         CHECKPOINT,
+        Option(
+            "web",
+            "write the interactive web demo into DIR: a static site (MuJoCo wasm + onnxruntime-web, docs/web.md)",
+            Path,
+            metavar="DIR",
+        ),
+        Option("serve", "with --web: also serve the site on a local port and print its address (Ctrl-C stops)"),
     ),
     provides={"push_rollout": f"{_PKG}.push"},
     tune_metrics={"train/episode_length": "max", "train/r_style": "max"},  # steps before a fall; style reward r_S

@@ -1,9 +1,12 @@
-"""`charctl export RUN --onnx F | --torchscript F | --bvh F | --video F [--commands S]` and `charctl play`.
+"""`charctl export RUN --onnx F | --torchscript F | --bvh F | --video F [--commands S] | --web DIR [--serve]`
+and `charctl play`.
 
 The exported policy takes the raw state (243) and, for cGAIL, the command blend c̄ (K) and
 returns the mean action (28 PD-target offsets, radians); the observation normaliser is inside.
 A command schedule "walk:0,run:3,right_kick:6" (skill:start second) drives a rollout that is
-written as BVH (kinematic record of the simulated character) and/or mp4.
+written as BVH (kinematic record of the simulated character) and/or mp4. `--web DIR` writes the
+interactive web demo (`web_site.py`, docs/web.md), whose ONNX graph also computes the state from
+MuJoCo's arrays (`web_graph.py`); `--serve` then serves it on a local port.
 """
 
 from __future__ import annotations
@@ -112,8 +115,15 @@ def schedule_rollout(tr: TrainedRun, schedule: list[tuple[float, int]], seconds:
 
 
 def export(target: str, options: dict, overrides: list[str]) -> None:
-    """--onnx / --torchscript of the policy, --bvh / --video of a commanded rollout (--commands, --seconds)."""
+    """--onnx / --torchscript of the policy, --bvh / --video of a commanded rollout (--commands, --seconds),
+    --web DIR: the interactive web demo (--serve: then serve it)."""
     (run_dir,) = resolve_run_dirs([target], overrides, "export")
+    if options.get("serve") and not options.get("web"):
+        raise CharctlError("--serve serves the site --web DIR writes: give --web DIR too")
+    if options.get("web"):
+        from charctl.experiments.cgail.web_site import check_web_sources
+
+        check_web_sources()  # before the run is loaded: the npm packages the site copies are installed
     tr = load_trained_run(run_dir, options.get("checkpoint"))
     # every argument is checked before anything is written (the schedule names the run's skills)
     names = tr.skill_names
@@ -145,8 +155,27 @@ def export(target: str, options: dict, overrides: list[str]) -> None:
             )
             print(f"wrote {options['video']} ({info['frames']} frames, falls: {stats['falls']})")
         did = True
+    if options.get("web"):
+        from charctl.experiments.cgail.web_site import serve, write_site
+
+        if tr.cfg.reward.kind == "tracking":
+            raise CharctlError(
+                f"{run_dir} is a tracking run: its policy needs the reference clip's phase, which the web demo "
+                "does not play; export a cgail (adversarial) run"
+            )
+        out = Path(options["web"])
+        info = write_site(tr, out, options.get("checkpoint"))
+        how = (
+            ""
+            if options.get("serve")
+            else f": serve it with any static file server, e.g. python3 -m http.server -d {out}"
+        )
+        print(f"wrote {out} ({info['files']} files, {info['bytes'] / 1e6:.1f} MB){how}")
+        if options.get("serve"):
+            serve(out)
+        did = True
     if not did:
-        raise CharctlError("say what to export: --onnx FILE, --torchscript FILE, --bvh FILE or --video FILE")
+        raise CharctlError("say what to export: --onnx FILE, --torchscript FILE, --bvh FILE, --video FILE or --web DIR")
 
 
 def _display_problem() -> str | None:
