@@ -23,7 +23,10 @@ app = typer.Typer(
     pretty_exceptions_enable=False,
     context_settings={"help_option_names": ["-h", "--help"]},
 )
-data_app = typer.Typer(help="Inspect the motion clips (DeepMimic clips shipped in pybullet).", no_args_is_help=True)
+data_app = typer.Typer(
+    help="Inspect the motion clips (DeepMimic clips shipped in pybullet) and import your own mocap files.",
+    no_args_is_help=True,
+)
 app.add_typer(data_app, name="data")
 
 OverridesArg = typer.Argument(None, help="Hydra overrides, e.g. scale=smoke ppo.lr=1e-4", show_default=False)
@@ -52,6 +55,35 @@ def data_show(
     from charctl.commands.data import show_clip
 
     show_clip(clip)
+
+
+@data_app.command("import")
+def data_import(
+    file: Path = typer.Argument(..., help="a BVH motion-capture file of any skeleton"),
+    skeleton: str | None = typer.Option(
+        None,
+        "--skeleton",
+        help="joint map: cmu|mixamo|lafan1|biovision|neuron|unity|daz|smpl|charctl or MAP.yaml (default: detected)",
+    ),
+    name: str | None = typer.Option(None, "--name", help="clip name (default: the file's stem)"),
+    output: Path | None = typer.Option(None, "-o", "--output", help="clip file to write (default imported/NAME.txt)"),
+    fps: float | None = typer.Option(None, "--fps", help="frame rate of the clip (default 60)"),
+    up: str | None = typer.Option(None, "--up", help="the file's up axis: y|z|x|-y|-z|-x (default: detected)"),
+    units: str | None = typer.Option(None, "--units", help="m|cm|mm|in|cmu or metres per unit (default: detected)"),
+    start: float | None = typer.Option(None, "--start", help="first second of the file to import"),
+    stop: float | None = typer.Option(None, "--stop", help="last second of the file to import"),
+    label: str | None = typer.Option(None, "--label", help="motion class label (default: the name)"),
+    ground: bool = typer.Option(
+        True, "--ground/--no-ground", help="plant the feet, fit the height, keep bodies above the ground"
+    ),
+    report: bool = typer.Option(True, "--report/--no-report", help="write NAME.report.md, filmstrip and quality JSON"),
+    tracking: bool = typer.Option(True, "--tracking/--no-tracking", help="measure the PD tracking error (a few s)"),
+) -> None:
+    """Retarget a mocap file of any skeleton onto the humanoid: a clip every experiment takes, and its
+    quality report (docs/motion_import.md)."""
+    from charctl.commands.data import import_motion
+
+    import_motion(file, skeleton, name, output, fps, up, units, start, stop, label, report, tracking, ground)
 
 
 # ---------------------------------------------------------------------------- train

@@ -1,7 +1,8 @@
 """The clip catalogue: DeepMimic clips shipped in the installed `pybullet` package.
 
 Clips are addressed by short names (`walk`, `run`, `walker/turn_left0`, ...), by a path to a
-user's DeepMimic `.txt` file or a `.bvh` file, and any of them with the suffix `:mirror` for
+user's DeepMimic `.txt` file (such as the clips `charctl data import` writes from any mocap skeleton)
+or a charctl `.bvh` file, and any of them with the suffix `:mirror` for
 the left/right mirrored copy (e.g. `kick:mirror` is a left kick). Nothing is downloaded: the
 files are read from `pybullet_data` at run time.
 """
@@ -90,6 +91,8 @@ def canonical_name(spec: str) -> str:
 def _load_base(spec: str) -> Clip:
     from charctl.motion.deepmimic import read_deepmimic
 
+    if spec.startswith("~"):
+        spec = str(Path(spec).expanduser())
     if not Path(spec).exists():
         spec = canonical_name(spec)
     if spec in _CATALOGUE:
@@ -101,7 +104,9 @@ def _load_base(spec: str) -> Clip:
 
         return read_bvh_as_clip(path)
     if path.suffix or "/" in spec or path.exists():
-        return read_deepmimic(path)
+        from charctl.motion.imported import apply_import_meta
+
+        return apply_import_meta(read_deepmimic(path), path)  # `charctl data import` files: their name and label
     stems = {file[: -len(".txt")]: name for name, (file, _) in _CATALOGUE.items()}
     close = difflib.get_close_matches(spec, clip_names() + list(stems), n=3)
     close = list(dict.fromkeys(stems.get(c, c) for c in close))
