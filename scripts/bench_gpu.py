@@ -139,9 +139,10 @@ def main() -> None:
             flush=True,
         )
         print("         time per phase: " + ", ".join(f"{k} {100 * v:.0f} %" for k, v in r["phase_fractions"].items()))
+        if a.json:  # after each env count, so a bench stopped early keeps what it measured
+            a.json.parent.mkdir(parents=True, exist_ok=True)
+            a.json.write_text(json.dumps(results, indent=2))
     if a.json:
-        a.json.parent.mkdir(parents=True, exist_ok=True)
-        a.json.write_text(json.dumps(results, indent=2))
         print(f"figures: {a.json}")
 
 

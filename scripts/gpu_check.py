@@ -61,12 +61,12 @@ def gpu_name() -> str | None:
     return torch.cuda.get_device_name(0) if torch.cuda.is_available() else None
 
 
-def parity(out: Path) -> dict:
+def parity(out: Path, timeout: float = 1800, pytest_args: tuple[str, ...] = ()) -> dict:
     rc, text = run(
-        [PY, "-m", "pytest", "-q", "-s", "tests/test_gpu_path.py"],
+        [PY, "-m", "pytest", "-q", "-s", "tests/test_gpu_path.py", *pytest_args],
         out / "parity.log",
         env={"CHARCTL_WARP_TEST_DEVICE": "cuda"},
-        timeout=1800,
+        timeout=timeout,
     )
     errors = re.search(r"max body position error \(m\) after k control steps: (\{[^}]*\})", text)
     summary = [line for line in text.splitlines() if re.search(r"\d+ (passed|failed|error)", line)]
@@ -77,24 +77,29 @@ def parity(out: Path) -> dict:
     }
 
 
-def bench(out: Path, envs: list[int]) -> dict:
+def bench(out: Path, envs: list[int], timeout: float = 3600) -> dict:
     path = out / "bench.json"
+    path.unlink(missing_ok=True)
     rc, text = run(
         [PY, "scripts/bench_gpu.py", "--device", "cuda", "--json", str(path), "--envs", *map(str, envs)],
         out / "bench.log",
-        timeout=3600,
+        timeout=timeout,
     )
-    figures = json.loads(path.read_text()) if rc == 0 and path.is_file() else None
+    # bench_gpu.py rewrites the file after each env count: a bench stopped early keeps the counts it finished
+    figures = json.loads(path.read_text()) if path.is_file() else None
+    if figures is not None and not figures.get("runs"):
+        figures = None
     return {"rc": rc, "figures": figures, "tail": text[-2000:]}
 
 
-def training(out: Path, minutes: float) -> dict:
+def training(out: Path, minutes: float, stop_timeout: float = 900) -> dict:
+    """`minutes` of the paper-scale run, then SIGINT; `stop_timeout`: how long it may take to stop after it."""
     runs = out / "runs"
     rc, text = run(
         [CHARCTL, "train", "cgail", "scale=paper", "env.backend=warp", "device=cuda", f"output_root={runs}"],
         out / "train.log",
         interrupt_after=60 * minutes,
-        timeout=900,
+        timeout=stop_timeout,
     )
     dirs = sorted((runs / "cgail").glob("*/")) if (runs / "cgail").is_dir() else []
     result: dict = {"rc": rc, "tail": text[-1500:]}

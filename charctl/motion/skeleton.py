@@ -11,6 +11,7 @@ parent. Rotations of the 12 movable joints are stored in clips in `CLIP_JOINTS` 
 from __future__ import annotations
 
 import functools
+import os
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -148,12 +149,29 @@ class Skeleton:
         return np.array([self.index(mirror_name(n)) for n in self.names])
 
 
+# A folder laid out like pybullet_data's clip files (data/motions/..., humanoid/humanoid.urdf), read
+# instead of pybullet_data when set: for a machine without pybullet, e.g. an offline GPU node (docs/gpu.md).
+CLIP_DIR_ENV = "CHARCTL_CLIP_DIR"
+
+
 def pybullet_data_path() -> Path:
-    """Folder of the installed `pybullet_data` package (clips and URDFs live there)."""
+    """Folder of the clips and URDFs: $CHARCTL_CLIP_DIR when set, else the installed `pybullet_data` package."""
+    given = os.environ.get(CLIP_DIR_ENV)
+    if given:
+        path = Path(given).expanduser()
+        if not (path / "humanoid" / "humanoid.urdf").is_file():
+            raise CharctlError(
+                f"{CLIP_DIR_ENV}={given} has no humanoid/humanoid.urdf: point it at a copy of pybullet_data's "
+                "clip files (scripts/node_bundle.py clips DIR; docs/gpu.md)"
+            )
+        return path
     try:
         import pybullet_data
-    except ImportError as exc:  # pragma: no cover - install problem
-        raise CharctlError("the 'pybullet' package is not installed: run `make install`") from exc
+    except ImportError as exc:
+        raise CharctlError(
+            f"the 'pybullet' package is not installed: run `make install`, or set {CLIP_DIR_ENV} to a copy of "
+            "its clip files (docs/gpu.md)"
+        ) from exc
     return Path(pybullet_data.getDataPath())
 
 
