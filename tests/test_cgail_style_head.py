@@ -225,3 +225,65 @@ def test_learner_with_low_style_termination_ends_episodes_and_logs_them():
     # every step is "low" at threshold 0.999: episodes end every 2 steps unless they fell first
     assert stats["train/style_terminations"] >= 4 * 8 // 2 - 4 - stats["train/falls"]
     assert stats["train/episode_length"] <= 2.0
+
+
+def test_multi_skill_tracking_baseline_has_command_and_phase_in_its_inputs():
+    """reward.kind=tracking over several skills (the fidelity anchor): the policy gets the command (cond) and
+    the state the clip phase; the reward is the tracking reward against the commanded clip; switching
+    commands mid-episode is refused by the config check."""
+    from omegaconf import OmegaConf
+
+    from charctl.experiments.cgail.config import Config
+    from charctl.experiments.cgail.env import PHASE_DIM
+    from charctl.experiments.cgail.features import STATE_DIM
+    from charctl.experiments.cgail.train import CgailLearner
+
+    cfg = OmegaConf.merge(
+        OmegaConf.structured(Config),
+        {
+            "use_skills": ["walk", "right_kick"],
+            "reward": {"kind": "tracking"},
+            "env": {"num_envs": 4, "episode_seconds": 1.0, "switch_prob": 0.0},
+            "ppo": {"hidden": [16], "minibatch_size": 32, "epochs": 1},
+            "disc": {"hidden": [16], "batch_size": 32, "steps_per_iter": 1, "replay_size": 256},
+            "train": {"rollout_steps": 8, "torch_threads": 1, "fidelity_every": 0},
+        },
+    )
+    assert Config.check(cfg) is None
+    learner = CgailLearner(cfg)
+    assert learner.env.state_dim == STATE_DIM + 2 + PHASE_DIM
+    assert learner.agent.model.cond_dim == 2
+    stats = learner.iterate()
+    assert 0.0 < stats["train/r_track"] <= 1.0
+    switching = OmegaConf.merge(cfg, {"env": {"switch_prob": 0.01}})
+    assert "needs env.switch_prob=0" in Config.check(switching)
+
+
+def test_performed_after_switch_counts_a_replayed_kick_and_not_a_stance():
+    """The switch study's "kick performed" check: the kick clip's own bodies reach 1.0 x its foot peak
+    (performed), a character frozen in the clip's first pose does not, and a fall before the peak
+    does not count."""
+    from types import SimpleNamespace
+
+    import numpy as np
+
+    from charctl.experiments.cgail.config import SkillConfig
+    from charctl.experiments.cgail.evaluate import performed_after_switch
+    from charctl.experiments.cgail.fidelity import clip_reference
+    from charctl.experiments.cgail.skills import load_skills
+
+    kick = load_skills([SkillConfig("right_kick", "kick")], 30.0)[0]
+    ref = clip_reference(kick)
+    tr = SimpleNamespace(
+        agent=SimpleNamespace(skills=[kick]), cfg=SimpleNamespace(env=SimpleNamespace(control_hz=30.0))
+    )
+    F = len(ref.body_pos)
+    pos = np.stack([ref.body_pos, np.repeat(ref.body_pos[:1], F, 0), ref.body_pos], axis=1)  # (F, 3, 15, 3)
+    rot = np.stack([ref.body_rot, np.repeat(ref.body_rot[:1], F, 0), ref.body_rot], axis=1)
+    alive = np.ones((F + 5, 3), dtype=bool)
+    alive[5 + 3 :, 2] = False  # trial 2 falls 3 frames after the switch at frame 5
+    out = performed_after_switch(tr, 0, pos, rot, alive, t_switch=5)
+    assert out["foot_peak"][0] == pytest.approx(out["clip_foot_peak"])
+    assert out["clip_foot_peak"] == pytest.approx(1.28, abs=0.01)
+    assert out["foot_peak"][1] < 0.2
+    assert out["performed"] == 1

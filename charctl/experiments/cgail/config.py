@@ -184,6 +184,12 @@ class Config(BaseConfig):
             return "reward.low_style_threshold must lie in [0, 1) and reward.low_style_steps be >= 1"
         if cfg.reward.low_style_threshold > 0 and (cfg.env.backend != "cpu" or cfg.reward.kind != "adversarial"):
             return "reward.low_style_threshold > 0 needs env.backend=cpu and reward.kind=adversarial"
+        n_skills = len(cfg.use_skills) if cfg.use_skills else len(cfg.skills)
+        if cfg.reward.kind == "tracking" and n_skills > 1 and cfg.env.switch_prob > 0:
+            return (
+                "reward.kind=tracking over several skills needs env.switch_prob=0: the reference phase belongs to "
+                "the clip an episode started with (the multi-skill tracking baseline holds one command per episode)"
+            )
         if cfg.disc.style_head not in ("shared", "per_skill"):
             return f"disc.style_head must be 'shared' or 'per_skill', got {cfg.disc.style_head!r}"
         if cfg.disc.style_head == "per_skill" and not cfg.cgail.conditional:

@@ -347,7 +347,7 @@ def eval_switch(
         env.start_frame = 0
         env.random_yaw = False
         env.reset(np.arange(trials))
-        probs, rs, rc, alive_hist = [], [], [], []
+        probs, rs, rc, alive_hist, pos_after, rot_after = [], [], [], [], [], []
         alive = np.ones(trials, dtype=bool)
         for t in range(t_end):
             if t == t_switch:
@@ -372,6 +372,9 @@ def eval_switch(
             rc.append(r_c)
             alive_hist.append(alive.copy())
             alive &= ~res.terminated
+            if t_switch <= t < t_switch + int(PERFORM_SECONDS * hz):  # bodies after the step, for the peaks
+                pos_after.append(env.sim.body_pos.copy())
+                rot_after.append(env.sim.body_quat_xyzw.copy())
         probs, rs, rc = (torch.stack(x).cpu().numpy() for x in (probs, rs, rc))
         live = np.array(alive_hist)
         pb = probs[t_switch:, :, kb]
@@ -383,6 +386,7 @@ def eval_switch(
         lat_ok = [x for x in latency if x is not None]
         falls = int((~alive).sum())
         summary[name] = {
+            **performed_after_switch(tr, kb, np.array(pos_after), np.array(rot_after), np.array(alive_hist), t_switch),
             "ramp_frames": ramp,
             "alive_at_switch": int(alive_at_switch.sum()),
             "latency_frames_mean": float(np.mean(lat_ok)) if lat_ok else None,
@@ -405,17 +409,20 @@ def eval_switch(
         "curves": {n: {k: v.tolist() for k, v in c.items()} for n, c in curves.items()},
     }
     write_json(out / f"switch_{a}_to_{b}.json", result)
+    peak_col = f"{b} foot peak in {PERFORM_SECONDS:g} s (m, clip)"
     rows = {
         n: {
             "latency (frames, P(B)>0.5)": s["latency_frames_mean"],
             "never switched": s["never_switched"],
             "falls": s["falls"],
             "alive at switch": s["alive_at_switch"],
+            peak_col: f"{s['foot_peak_mean']:.2f} ({s['clip_foot_peak']:.2f})",
+            f"performed (peak >= {PERFORM_SHARE:g} clip, no fall)": s["performed"],
             "trials": s["trials"],
         }
         for n, s in summary.items()
     }
-    cols = ["latency (frames, P(B)>0.5)", "never switched", "falls", "alive at switch", "trials"]
+    cols = list(next(iter(rows.values())))
     print_table(f"Fig 6.10/6.11: switch {a} -> {b}", rows, cols)
     append_report(
         out,
@@ -426,6 +433,35 @@ def eval_switch(
         f"latency = frames after the switch until the classifier's P({b}) > 0.5",
     )
     return result
+
+
+PERFORM_SECONDS = 3.0  # the window after a switch in which the new skill must be seen done (issue 24)
+PERFORM_SHARE = 0.8  # done = the higher foot reaches this share of the clip's highest foot, without a fall
+
+
+def performed_after_switch(
+    tr: TrainedRun, kb: int, pos: np.ndarray, rot: np.ndarray, alive_hist: np.ndarray, t_switch: int
+) -> dict:
+    """Whether skill `kb` is seen done in the `PERFORM_SECONDS` after a switch to it: per trial the higher
+    foot's peak height (m) over the frames before any fall, against the clip's. `pos` / `rot` (F, N, 15, ...)
+    world bodies of the F frames after the switch; `alive_hist` (T, N) alive before each step."""
+    from charctl.eval.fidelity import signature
+    from charctl.experiments.cgail.fidelity import clip_reference
+
+    ref = clip_reference(tr.agent.skills[kb])
+    clip_sig = signature(ref.body_pos, ref.body_rot, ref.dt, ref.ground)
+    clip_peak = max(clip_sig["right_foot_peak"], clip_sig["left_foot_peak"])
+    alive_after = alive_hist[t_switch : t_switch + len(pos)].T  # (N, F)
+    lengths = np.where(alive_after.all(axis=1), alive_after.shape[1], alive_after.argmin(axis=1))
+    sig = signature(pos.swapaxes(0, 1), rot.swapaxes(0, 1), 1.0 / tr.cfg.env.control_hz, lengths=np.maximum(lengths, 1))
+    peak = np.maximum(sig["right_foot_peak"], sig["left_foot_peak"])
+    ok = (peak >= PERFORM_SHARE * clip_peak) & alive_after.all(axis=1)
+    return {
+        "foot_peak": peak.tolist(),
+        "foot_peak_mean": float(peak.mean()),
+        "clip_foot_peak": float(clip_peak),
+        "performed": int(ok.sum()),
+    }
 
 
 def _plot_switch(curves, names, ka, kb, t_switch, hz, path) -> None:
