@@ -23,6 +23,8 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
+
 REPO = Path(__file__).resolve().parent.parent
 PY = sys.executable
 CHARCTL = str(Path(PY).parent / "charctl")
@@ -105,26 +107,23 @@ def training(out: Path, minutes: float, stop_timeout: float = 900) -> dict:
     result: dict = {"rc": rc, "tail": text[-1500:]}
     if not dirs:
         return result
-    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+    from charctl.eval.tb import read_scalars
 
-    acc = EventAccumulator(str(dirs[-1] / "tb"), size_guidance={"scalars": 0})
-    acc.Reload()
-    tags = set(acc.Tags().get("scalars", []))
-
-    def series(tag: str) -> list:
-        return acc.Scalars(tag) if tag in tags else []
-
-    ep, rs, sps = series("train/episode_length"), series("train/r_style"), series("perf/samples_per_s")
+    scalars = read_scalars(dirs[-1] / "tb")
+    empty = (np.zeros(0), np.zeros(0))
+    (ep_s, ep), (_, rs), (_, sps) = (
+        scalars.get(t, empty) for t in ("train/episode_length", "train/r_style", "perf/samples_per_s")
+    )
     result.update(
         {
             "run_dir": str(dirs[-1]),
             "iterations": len(ep),
-            "samples": ep[-1].step if ep else 0,
-            "episode_length_first": ep[0].value if ep else None,
-            "episode_length_last": ep[-1].value if ep else None,
-            "r_style_first": rs[0].value if rs else None,
-            "r_style_last": rs[-1].value if rs else None,
-            "samples_per_s_mean": sum(s.value for s in sps[1:]) / max(len(sps) - 1, 1) if sps else None,
+            "samples": int(ep_s[-1]) if len(ep) else 0,
+            "episode_length_first": float(ep[0]) if len(ep) else None,
+            "episode_length_last": float(ep[-1]) if len(ep) else None,
+            "r_style_first": float(rs[0]) if len(rs) else None,
+            "r_style_last": float(rs[-1]) if len(rs) else None,
+            "samples_per_s_mean": float(np.mean(sps[1:])) if len(sps) > 1 else (float(sps[0]) if len(sps) else None),
         }
     )
     if result["samples_per_s_mean"]:
