@@ -55,6 +55,9 @@ class Run:
     experiment: str
     cfg: Any  # DictConfig
     resumed: bool = False
+    # a resume's overrides: written into config.yaml (and resumes.txt) once the checkpoint has loaded against
+    # the new config's signature, so a rejected resume leaves the run as it was
+    resume_overrides: list[str] = field(default_factory=list)
     _writer: Any = field(default=None, repr=False)
     _max_step: int | None = field(default=None, repr=False)  # largest TensorBoard step logged by this process
     _purge_step: int | None = field(default=None, repr=False)  # resumed: TensorBoard events from here on are stale
@@ -122,6 +125,9 @@ class Run:
 
     def load_checkpoint(self, signature: dict | None = None, name: str = "last.pt") -> dict:
         payload = load_checkpoint(self.dir / "checkpoints" / name, self.experiment, signature, payload=True)
+        if self.resumed and self.resume_overrides:
+            record_resume_overrides(self, self.resume_overrides)
+            self.resume_overrides = []
         if self.resumed and "tb_step" in payload:
             # tb_step None: nothing was logged before this checkpoint, so every step in tb/ is stale
             # (a killed process logged past it): purge from step 0.
@@ -270,6 +276,18 @@ def open_run(run_dir: str | Path, schema: type | None = None, overrides: list[st
     if schema is not None:
         cfg = validate(cfg, schema, experiment)
     return Run(dir=run_dir, experiment=experiment, cfg=cfg, resumed=True)
+
+
+def record_resume_overrides(run: Run, overrides: list[str]) -> None:
+    """A resume with overrides writes the merged config back to config.yaml (so a later resume, eval or export
+    sees what the run now trains with) and appends the override line to resumes.txt (the run's history)."""
+    from charctl.config import to_yaml
+
+    if not overrides:
+        return
+    atomic_write_text(run.dir / "config.yaml", to_yaml(run.cfg))
+    with open(run.dir / "resumes.txt", "a") as fh:
+        fh.write(f"{datetime.now().isoformat(timespec='seconds')} --resume {' '.join(overrides)}\n")
 
 
 def latest_run(output_root: str | Path, experiment: str, require_checkpoint: bool = True) -> Path:

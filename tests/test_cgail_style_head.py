@@ -287,3 +287,22 @@ def test_performed_after_switch_counts_a_replayed_kick_and_not_a_stance():
     assert out["clip_foot_peak"] == pytest.approx(1.28, abs=0.01)
     assert out["foot_peak"][1] < 0.2
     assert out["performed"] == 1
+
+
+def test_resume_with_overrides_records_them_in_the_run_config(smoke_run_copy):
+    """A resume's overrides reach config.yaml (and resumes.txt) once the checkpoint has loaded; a resume whose
+    overrides the checkpoint rejects leaves config.yaml as it was."""
+    from omegaconf import OmegaConf
+
+    from charctl.commands.train import train_command
+    from charctl.errors import CharctlError
+
+    run_dir = smoke_run_copy("cgail")
+    before = (run_dir / "config.yaml").read_text()
+    with pytest.raises(CharctlError, match="hidden"):
+        train_command("cgail", ["ppo.hidden=[16]", "train.total_samples=2048"], resume=run_dir)
+    assert (run_dir / "config.yaml").read_text() == before and not (run_dir / "resumes.txt").exists()
+    train_command("cgail", ["train.total_samples=1024", "reward.low_style_threshold=0.05"], resume=run_dir)
+    cfg = OmegaConf.load(run_dir / "config.yaml")
+    assert cfg.train.total_samples == 1024 and cfg.reward.low_style_threshold == 0.05
+    assert "reward.low_style_threshold=0.05" in (run_dir / "resumes.txt").read_text()

@@ -49,6 +49,7 @@ def train_command(
         run = open_run(resume, schema, overrides)
         if not run.has_checkpoint():
             raise CharctlError(f"{resume} has no checkpoint to resume from (checkpoints/last.pt)")
+        run.resume_overrides = list(overrides)  # into config.yaml once the checkpoint loads (Run.load_checkpoint)
         print(f"resuming {run.dir}")
         _run(train_fn, run)
         return [run.dir]
