@@ -665,6 +665,10 @@ def test_resume_hides_tensorboard_steps_logged_after_the_checkpoint(tmp_path, lo
     first.save_checkpoint({"step": 10})
     first.log_scalars({"train/loss": 2.0}, 640)  # after the checkpoint: the kill loses its state
     first.close()
+    # A real resume is a later process. In one process within one second both event files share their
+    # time and pid and differ only by torch's global writer counter, which TensorBoard orders as text
+    # ("…10" before "…9"), so late in a long test session the resumed file could be read first.
+    time.sleep(1.1)
     resumed = Run(dir=tmp_path, experiment="com-cnn", cfg=None, resumed=True)
     resumed.load_checkpoint()
     resumed.log_scalars({"train/loss": 3.0}, 640)
