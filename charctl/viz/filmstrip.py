@@ -16,16 +16,11 @@ def render_poses(model, qpos: np.ndarray, width: int = 240, height: int = 240, c
     `camera` names a camera of the model (the humanoid's "side" / "front" follow its centre of mass)."""
     import mujoco
 
-    from charctl.viz.video import make_renderer
+    from charctl.viz.video import camera_id, make_renderer
 
     renderer = make_renderer(model, width, height)
     data = mujoco.MjData(model)
-    cam = -1 if camera is None else camera
-    if isinstance(camera, str):
-        try:
-            cam = model.camera(camera).id
-        except KeyError:
-            cam = -1
+    cam = camera_id(model, camera)
     frames = []
     try:
         for q in np.atleast_2d(qpos):

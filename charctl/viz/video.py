@@ -24,6 +24,19 @@ def _ensure_gl_backend() -> None:
         os.environ.setdefault("PYOPENGL_PLATFORM", "osmesa")
 
 
+def camera_id(model, camera: str | int | None) -> int:
+    """MuJoCo camera id of `camera`: a camera name of the model (-1, the free camera, when it has none of
+    that name), an id as given, or -1 for None."""
+    if camera is None:
+        return -1
+    if isinstance(camera, str):
+        try:
+            return model.camera(camera).id
+        except KeyError:
+            return -1
+    return camera
+
+
 def make_renderer(model, width: int = 640, height: int = 360):
     """A mujoco.Renderer, or a one-line CharctlError explaining how to enable rendering."""
     _ensure_gl_backend()
@@ -101,12 +114,7 @@ def render_qpos(
 
     renderer = make_renderer(model, width, height)
     data = mujoco.MjData(model)
-    cam = camera
-    if isinstance(camera, str):
-        try:
-            cam = model.camera(camera).id
-        except KeyError:
-            cam = -1
+    cam = camera_id(model, camera)
     frames = []
     t0 = time.perf_counter()
     try:
