@@ -87,6 +87,14 @@ class RewardConfig:
     # 0 = off (the paper). CPU env only. charctl.experiments.cgail.termination; docs/cgail.md, "Fidelity recipe".
     low_style_threshold: float = 0.0
     low_style_steps: int = 10
+    # Early termination on a large pose error against the commanded clip's timed reference (DeepMimic-style
+    # tracking termination; the reward stays adversarial). From an RSI the reference runs on from the start frame
+    # (a non-looping clip restarts at frame 0 when it ends); after a command switch it starts at frame 0 once the
+    # ramp has finished. An episode ends (no bootstrap, not a fall) when a hand, a foot (relative to the root,
+    # heading frame) or the root height is farther than this (m) from the reference, outside the grace steps
+    # that follow each restart. 0 = off (the paper). CPU env only. docs/cgail.md, "Fidelity recipe".
+    pose_error_threshold: float = 0.0
+    pose_error_grace_steps: int = 10  # control steps after a reference restart with no check (time to reach frame 0)
 
 
 @dataclass
@@ -184,6 +192,10 @@ class Config(BaseConfig):
             return "reward.low_style_threshold must lie in [0, 1) and reward.low_style_steps be >= 1"
         if cfg.reward.low_style_threshold > 0 and (cfg.env.backend != "cpu" or cfg.reward.kind != "adversarial"):
             return "reward.low_style_threshold > 0 needs env.backend=cpu and reward.kind=adversarial"
+        if cfg.reward.pose_error_threshold < 0 or cfg.reward.pose_error_grace_steps < 0:
+            return "reward.pose_error_threshold and reward.pose_error_grace_steps must be >= 0"
+        if cfg.reward.pose_error_threshold > 0 and (cfg.env.backend != "cpu" or cfg.reward.kind != "adversarial"):
+            return "reward.pose_error_threshold > 0 needs env.backend=cpu and reward.kind=adversarial"
         n_skills = len(cfg.use_skills) if cfg.use_skills else len(cfg.skills)
         if cfg.reward.kind == "tracking" and n_skills > 1 and cfg.env.switch_prob > 0:
             return (

@@ -77,6 +77,14 @@ class StepResult:
     terminated: np.ndarray  # (N,) bool: fall or blow-up
     truncated: np.ndarray  # (N,) bool: time limit
     unstable: np.ndarray  # (N,) bool: simulator blow-up this step
+    pose_ended: np.ndarray | None = None  # (N,) bool: ended by a large pose error (part of `terminated`, not a fall)
+
+
+def reference_pose_error(obs: np.ndarray, ref: np.ndarray) -> np.ndarray:
+    """(N,) m: the largest distance between simulated and reference disc observations (N, 133) over the
+    four end effectors (hands and feet, relative to the root in the heading frame) and the root height."""
+    ee = np.linalg.norm((obs[:, _OBS_EE] - ref[:, _OBS_EE]).reshape(len(obs), -1, 3), axis=2).max(axis=1)
+    return np.maximum(ee, np.abs(obs[:, 0] - ref[:, 0]))
 
 
 def update_fall_rates(
@@ -104,10 +112,19 @@ def skill_probabilities(rates: np.ndarray, fall_weight: float, floor: float = 1e
 
 class CgailEnv:
     def __init__(
-        self, skills: list[SkillData], env_cfg, seed: int = 0, conditional: bool = True, tracking: bool = False
+        self,
+        skills: list[SkillData],
+        env_cfg,
+        seed: int = 0,
+        conditional: bool = True,
+        tracking: bool = False,
+        pose_error_threshold: float = 0.0,
+        pose_error_grace_steps: int = 10,
     ):
         self.skills = skills
         self.tracking = tracking  # phase in the state, reference frame advanced every step
+        # training only (reward.pose_error_threshold): end episodes that leave the clip's timed reference
+        self.pose_threshold, self.pose_grace = float(pose_error_threshold), int(pose_error_grace_steps)
         self.cfg = env_cfg = plain_section(env_cfg)  # typed fields, cheap reads in the step loop
         self.K = len(skills)
         self.conditional = conditional
@@ -130,6 +147,8 @@ class CgailEnv:
         self.speed = np.array([s.mean_speed for s in skills])
         self.rest = np.zeros(self.sim.layout.nu)
         self.ref_frame = np.zeros(self.N, dtype=np.int64)  # reference clip frame at the current phase
+        self.ref_active = np.ones(self.N, dtype=bool)  # pose-error check: reference valid (off during a switch)
+        self.ref_grace = np.zeros(self.N, dtype=np.int64)  # pose-error check: steps left without a check
         self.clip_frames = np.array([len(sk.obs) for sk in skills])
         self.clip_loops = np.array([sk.loop for sk in skills])
         self.state_dim = STATE_DIM + GOAL_DIM + (PHASE_DIM if tracking else 0)
@@ -162,6 +181,7 @@ class CgailEnv:
         use_ramp = ramp and self.cfg.ramp_frames > 0
         self.w[ids] = np.where(changed, 0.0 if use_ramp else 1.0, self.w[ids])
         goal_ids = ids[changed]
+        self.ref_active[goal_ids] = False  # the new clip's reference starts once the ramp has ended
         self._new_goal(goal_ids)
 
     def _advance_ramp(self) -> None:
@@ -191,6 +211,8 @@ class CgailEnv:
         self.prev_cmd[ids] = skill
         self.w[ids] = 1.0
         self.steps[ids] = 0
+        self.ref_active[ids] = True
+        self.ref_grace[ids] = 0
         qpos = np.empty((len(ids), self.sim.layout.nq))
         qvel = np.empty((len(ids), self.sim.layout.nv))
         for k in np.unique(skill):  # <= K groups, vectorised inside
@@ -242,11 +264,45 @@ class CgailEnv:
         wrapped = np.where(self.clip_loops[self.cmd], nxt % np.maximum(last, 1), np.minimum(nxt, last))
         ended = ~self.clip_loops[self.cmd] & (nxt >= last)
         self.ref_frame = wrapped
+        return self._reference_obs(), ended
+
+    def _reference_obs(self, frames: np.ndarray | None = None) -> np.ndarray:
+        """(N, 133) the commanded clip's disc observation at every env's reference frame (or at `frames`)."""
+        frames = self.ref_frame if frames is None else frames
         ref = np.empty((self.N, DISC_OBS_DIM))
         for s in np.unique(self.cmd):  # <= K groups, vectorised inside
             m = self.cmd == s
-            ref[m] = self.skills[s].obs[self.ref_frame[m]]
-        return ref, ended
+            ref[m] = self.skills[s].obs[frames[m]]
+        return ref
+
+    def _advance_reference(self) -> np.ndarray:
+        """Pose-error termination: step every env's reference frame (a looping clip wraps, a non-looping one
+        restarts at frame 0 with grace steps after its last) and return the reference obs (N, 133) there."""
+        loops = self.clip_loops[self.cmd]
+        last = np.maximum(self.clip_frames[self.cmd] - 1, 1)
+        nxt = self.ref_frame + 1
+        restart = ~loops & (nxt > last)
+        self.ref_frame = np.where(restart, 0, np.where(loops, nxt % last, nxt))
+        self.ref_grace = np.where(restart, self.pose_grace, np.maximum(self.ref_grace - 1, 0))
+        return self._reference_obs()
+
+    def _pose_error(self, obs: np.ndarray, ref: np.ndarray) -> np.ndarray:
+        """(N,) m: `reference_pose_error` against the timed reference `ref` for non-looping clips, and
+        against the clip's closest frame for looping ones (locomotion: a cadence of its own is no error)."""
+        err = reference_pose_error(obs, ref)
+        for s in np.unique(self.cmd[self.clip_loops[self.cmd]]):
+            m = np.flatnonzero(self.cmd == s)
+            clip = self.skills[s].obs
+            each = reference_pose_error(np.repeat(obs[m], len(clip), axis=0), np.tile(clip, (len(m), 1)))
+            err[m] = each.reshape(len(m), len(clip)).min(axis=1)
+        return err
+
+    def _restart_reference_after_ramp(self) -> None:
+        """Envs whose command ramp has just finished: the new clip's reference starts at frame 0."""
+        start = ~self.ref_active & (self.w >= 1.0)
+        self.ref_frame[start] = 0
+        self.ref_grace[start] = self.pose_grace
+        self.ref_active |= start
 
     @property
     def state(self) -> np.ndarray:
@@ -269,12 +325,18 @@ class CgailEnv:
         r_track = np.zeros(self.N)
         if self.tracking:  # the phase in the state is the new one
             ref, clip_ended = self._advance_phase()
+        elif self.pose_threshold > 0:
+            ref = self._advance_reference()
         final_state, pair_next = self._features(k)
         if self.tracking:
             r_track = tracking_reward(pair_next, ref)
         r_goal = self._goal_reward(k)
         fell = self.sim.non_foot_ground_contact(self.cfg.fall_tolerance)
-        terminated = fell | unstable
+        pose_ended = np.zeros(self.N, dtype=bool)
+        if self.pose_threshold > 0:
+            checked = self.ref_active & (self.ref_grace == 0) & ~(fell | unstable)
+            pose_ended = checked & (self._pose_error(pair_next, ref) > self.pose_threshold)
+        terminated = fell | unstable | pose_ended
         self.steps += 1
         truncated = ((self.steps >= self.max_steps) | clip_ended) & ~terminated
         self.fall_count += int(fell.sum())
@@ -284,13 +346,15 @@ class CgailEnv:
         state, obs = final_state.copy(), pair_next.copy()
         self._state, self._obs = state, obs
         self._advance_ramp()
+        if self.pose_threshold > 0:
+            self._restart_reference_after_ramp()
         if done.size:
             self.reset(done)
         running = np.ones(self.N, dtype=bool)
         running[done] = False
         self._maybe_switch(np.flatnonzero(running))
         return StepResult(
-            self._state, self._obs, pair_next, final_state, r_goal, r_track, terminated, truncated, unstable
+            self._state, self._obs, pair_next, final_state, r_goal, r_track, terminated, truncated, unstable, pose_ended
         )
 
     def _goal_reward(self, k) -> np.ndarray:

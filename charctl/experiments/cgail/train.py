@@ -187,6 +187,7 @@ class Rollout:
     unstable: int
     falls: int
     style_ends: int = 0  # episodes ended by a low style reward (reward.low_style_threshold)
+    pose_ends: int = 0  # episodes ended by a large pose error (reward.pose_error_threshold)
 
 
 def collect_rollout(
@@ -227,7 +228,7 @@ def _collect_rollout(
     r_track = torch.zeros(steps, N, device=dev)
     bootstrap = torch.zeros(steps, N, device=dev)
     lengths = []
-    unstable = falls = style_ends = 0
+    unstable = falls = style_ends = pose_ends = 0
     for t in range(steps):
         obs = torch.as_tensor(env.state, dtype=torch.float32, device=dev)
         blend = torch.as_tensor(env.command_blend(), dtype=torch.float32, device=dev)
@@ -269,9 +270,24 @@ def _collect_rollout(
         )
         lengths += list(steps_before[done] + 1)
         unstable += int(res.unstable.sum())
-        falls += int((res.terminated & ~res.unstable).sum())
+        pose_ended = res.pose_ended if res.pose_ended is not None else np.zeros(N, dtype=bool)
+        falls += int((res.terminated & ~res.unstable & ~pose_ended).sum())
+        pose_ends += int(pose_ended.sum())
     return Rollout(
-        storage, pairs, cond_all, cmd_a, cmd_b, w, r_goal, r_track, bootstrap, lengths, unstable, falls, style_ends
+        storage,
+        pairs,
+        cond_all,
+        cmd_a,
+        cmd_b,
+        w,
+        r_goal,
+        r_track,
+        bootstrap,
+        lengths,
+        unstable,
+        falls,
+        style_ends,
+        pose_ends,
     )
 
 
@@ -499,6 +515,8 @@ class CgailLearner(AgentCounters):
                 seed=cfg.seed,
                 conditional=self.agent.conditional,
                 tracking=cfg.reward.kind == "tracking",
+                pose_error_threshold=cfg.reward.pose_error_threshold,
+                pose_error_grace_steps=cfg.reward.pose_error_grace_steps,
             )
         self.samples_per_iteration = cfg.train.rollout_steps * self.env.N
         self.episode_lengths: list = []
@@ -664,6 +682,7 @@ class CgailLearner(AgentCounters):
             "train/unstable_resets_total": float(agent.unstable_total),
             "train/falls": float(ro.falls),
             "train/style_terminations": float(ro.style_ends),
+            "train/pose_terminations": float(ro.pose_ends),
             "train/unstable_rate": float(ro.unstable) / n,
             "sim/unstable_resets": float(ro.unstable),
         }

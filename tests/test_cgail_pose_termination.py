@@ -1,0 +1,121 @@
+"""Early termination on a large pose error against the commanded clip (reward.pose_error_threshold):
+the error by hand, the reference's timing (RSI, restart of a non-looping clip, start after a command
+switch's ramp), the closest-frame rule of looping clips, and the learner's counters."""
+
+import numpy as np
+import pytest
+from omegaconf import OmegaConf
+
+from charctl.experiments.cgail.config import EnvConfig, SkillConfig
+from charctl.experiments.cgail.env import CgailEnv, reference_pose_error
+from charctl.experiments.cgail.skills import load_skills
+
+
+@pytest.fixture(scope="module")
+def skills():
+    return load_skills([SkillConfig("walk", "walk"), SkillConfig("kick", "kick")], 30.0)
+
+
+def _env(skills, n=2, threshold=0.5, grace=3, ramp=4):
+    cfg = OmegaConf.structured(EnvConfig(num_envs=n, ramp_frames=ramp, switch_prob=0.0))
+    return CgailEnv(skills, cfg, seed=0, pose_error_threshold=threshold, pose_error_grace_steps=grace)
+
+
+def test_pose_error_is_the_largest_end_effector_or_root_height_distance():
+    obs, ref = np.zeros((3, 133)), np.zeros((3, 133))
+    ref[0, 121 + 3 : 121 + 6] = [0.3, 0.4, 0.0]  # second end effector 0.5 m away (3-4-5)
+    ref[1, 0] = -0.7  # root 0.7 m lower; a 0.2 m hand offset is smaller
+    ref[1, 121:124] = [0.0, 0.2, 0.0]
+    obs[2, 1:121] = 5.0  # velocities and joint rotations do not count
+    assert reference_pose_error(obs, ref) == pytest.approx([0.5, 0.7, 0.0])
+
+
+def test_reference_runs_on_from_the_rsi_frame_and_a_non_looping_clip_restarts_with_grace(skills):
+    env = _env(skills, grace=3)
+    env.forced_command = np.array([1, 1])
+    env.start_frame = 5
+    env.reset(np.arange(2))
+    assert env.ref_frame.tolist() == [5, 5] and env.ref_active.all() and (env.ref_grace == 0).all()
+    last = len(skills[1].obs) - 1
+    env.ref_frame[:] = last - 1
+    env._advance_reference()
+    assert env.ref_frame.tolist() == [last, last] and (env.ref_grace == 0).all()
+    env._advance_reference()  # past the last frame: back to the clip's start, unchecked for 3 steps
+    assert env.ref_frame.tolist() == [0, 0] and env.ref_grace.tolist() == [3, 3]
+    env._advance_reference()
+    assert env.ref_frame.tolist() == [1, 1] and env.ref_grace.tolist() == [2, 2]
+
+
+def test_a_switch_suspends_the_check_until_the_ramp_ends_then_starts_the_new_clip_at_frame_zero(skills):
+    env = _env(skills, grace=2, ramp=4)
+    env.forced_command = np.array([0, 0])
+    env.reset(np.arange(2))
+    env.set_command(np.array([0]), 1, ramp=True)
+    assert env.ref_active.tolist() == [False, True]
+    for _ in range(3):  # w = 0.25, 0.5, 0.75
+        env._advance_ramp()
+        env._restart_reference_after_ramp()
+        assert env.ref_active.tolist() == [False, True]
+    env._advance_ramp()  # w = 1: the kick's reference starts at its first frame, unchecked for 2 steps
+    env._restart_reference_after_ramp()
+    assert env.ref_active.tolist() == [True, True] and env.ref_frame[0] == 0 and env.ref_grace[0] == 2
+
+
+def test_looping_clips_are_scored_against_their_closest_frame_and_others_against_the_timed_one(skills):
+    env = _env(skills)
+    env.cmd[:] = [0, 1]
+    obs = np.stack([skills[0].obs[17], skills[1].obs[20]])
+    env.ref_frame[:] = [3, 3]  # walk: frame 17 is still a walk pose (0 error); kick: frame 3 is not frame 20
+    err = env._pose_error(obs, env._reference_obs())
+    assert err[0] == pytest.approx(0.0, abs=1e-12)
+    assert err[1] == pytest.approx(reference_pose_error(obs[1:], skills[1].obs[3:4])[0]) and err[1] > 0.5
+
+
+def test_episodes_that_leave_the_reference_end_without_counting_a_fall(skills):
+    """A threshold of 1 mm ends every checked kick episode after its first simulated step; 10 m never does."""
+    strict = _env(skills, threshold=1e-3, grace=0)
+    strict.forced_command = np.array([1, 1])
+    strict.reset(np.arange(2))
+    res = strict.step(np.zeros((2, 28)))
+    assert res.pose_ended.all() and res.terminated.all() and strict.fall_count == 0
+    loose = _env(skills, threshold=10.0, grace=0)
+    loose.forced_command = np.array([1, 1])
+    loose.reset(np.arange(2))
+    assert not loose.step(np.zeros((2, 28))).pose_ended.any()
+
+
+def test_learner_counts_pose_terminations_apart_from_falls():
+    from charctl.experiments.cgail.config import Config
+    from charctl.experiments.cgail.train import CgailLearner
+
+    cfg = OmegaConf.merge(
+        OmegaConf.structured(Config),
+        {
+            "use_skills": ["walk", "right_kick"],
+            "env": {"num_envs": 4, "episode_seconds": 5.0},
+            "ppo": {"hidden": [16], "minibatch_size": 32, "epochs": 1},
+            "disc": {"hidden": [16], "batch_size": 32, "steps_per_iter": 1, "replay_size": 256},
+            "reward": {"pose_error_threshold": 1e-3, "pose_error_grace_steps": 0},
+            "train": {"rollout_steps": 8, "torch_threads": 1, "fidelity_every": 0},
+        },
+    )
+    stats = CgailLearner(cfg).iterate()
+    # 1 mm: every step of every episode ends it (RSI states are exact, the first physics step is not)
+    assert stats["train/pose_terminations"] == 4 * 8 and stats["train/falls"] == 0
+    assert stats["train/episode_length"] == 1.0
+
+
+@pytest.mark.parametrize(
+    ("overrides", "message"),
+    [
+        ({"reward": {"pose_error_threshold": -0.1}}, "must be >= 0"),
+        ({"reward": {"pose_error_grace_steps": -1}}, "must be >= 0"),
+        ({"reward": {"pose_error_threshold": 0.5, "kind": "tracking"}}, "needs env.backend=cpu"),
+        ({"reward": {"pose_error_threshold": 0.5}, "env": {"backend": "warp"}}, "needs env.backend=cpu"),
+    ],
+)
+def test_config_errors(overrides, message):
+    from charctl.experiments.cgail.config import Config
+
+    cfg = OmegaConf.merge(OmegaConf.structured(Config), overrides)
+    assert message in Config.check(cfg)
