@@ -15,7 +15,6 @@ import numpy as np
 import pytest
 from omegaconf import OmegaConf
 
-from charctl.experiments.srb import fastmath as F
 from charctl.experiments.srb.config import Config
 from charctl.experiments.srb.qp import GRAVITY, N_EDGES, QPBatch, QPParams, friction_basis, full_problem, solve_batch
 from charctl.motion import rotations as R
@@ -309,23 +308,32 @@ def test_observation_layout(ref, body):
     s = ref.state(np.array([0, 5, 25]))
     np.testing.assert_allclose(obs[:, 0], s["pos"][:, 1])
     np.testing.assert_allclose(np.linalg.norm(obs[:, 1:5], axis=1), 1.0)
-    assert np.allclose(F.yaw_of(obs[:, 1:5]), 0.0, atol=1e-9)  # heading removed
+    assert np.allclose(R.yaw_about_y(obs[:, 1:5]), 0.0, atol=1e-9)  # heading removed
     np.testing.assert_allclose(obs[:, 19], np.array([0, 5, 25]) / ref.cycle)
     np.testing.assert_allclose(obs[:, 14][env.stance[:, 0]], 0.0)
 
 
-def test_fastmath_matches_rotations():
+def test_rotation_fast_paths_match_scipy():
+    """The component-wise forms the srb control loop uses (broadcasting rotate, yaw of +x, rotate_yaw,
+    log_map, to_matrix, multiply) against scipy's Rotation (an independent implementation)."""
+    from scipy.spatial.transform import Rotation
+
     rng = np.random.default_rng(0)
     q = R.normalize(rng.normal(size=(50, 4)))
     v = rng.normal(size=(50, 3))
-    np.testing.assert_allclose(F.qrot(q, v), R.rotate(q, v), atol=1e-12)
-    np.testing.assert_allclose(F.qmul(q, q[::-1]), R.multiply(q, q[::-1]), atol=1e-12)
-    np.testing.assert_allclose(F.yaw_of(q), R.yaw_about_y(q), atol=1e-9)
+    rot = Rotation.from_quat(q)
+    np.testing.assert_allclose(R.rotate(q, v), rot.apply(v), atol=1e-12)
+    np.testing.assert_allclose(R.rotate(q[:1], v), Rotation.from_quat(q[0]).apply(v), atol=1e-12)  # broadcast
+    product = Rotation.from_quat(R.multiply(q, q[::-1])).as_matrix()
+    np.testing.assert_allclose(product, (rot * rot[::-1]).as_matrix(), atol=1e-12)  # sign-free comparison
+    fwd = rot.apply([1.0, 0.0, 0.0])
+    np.testing.assert_allclose(R.yaw_about_y(q), np.arctan2(-fwd[:, 2], fwd[:, 0]), atol=1e-9)
     np.testing.assert_allclose(
-        F.rotate_yaw(np.full(50, 0.7), v), R.rotate(R.heading_quat(np.full(50, 0.7)), v), atol=1e-12
+        R.rotate_yaw(np.full(50, 0.7), v), Rotation.from_rotvec([0.0, 0.7, 0.0]).apply(v), atol=1e-12
     )
-    np.testing.assert_allclose(F.log_map(q), R.log_map(q), atol=1e-9)
-    np.testing.assert_allclose(F.to_matrix(q), R.to_matrix(q), atol=1e-12)
+    np.testing.assert_allclose(R.up_y(q), rot.apply([0.0, 1.0, 0.0])[:, 1], atol=1e-12)
+    np.testing.assert_allclose(R.log_map(q), rot.as_rotvec(), atol=1e-9)
+    np.testing.assert_allclose(R.to_matrix(q), rot.as_matrix(), atol=1e-12)
 
 
 # ---------------------------------------------------------------------------- push protocol

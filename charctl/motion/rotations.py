@@ -71,11 +71,11 @@ def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 
 def rotate(q: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """Rotate (..., 3) vectors by (..., 4) unit quaternions."""
-    u = q[..., :3]
-    w = q[..., 3:4]
-    t = 2.0 * cross(u, v)
-    return v + w * t + cross(u, t)
+    """Rotate (..., 3) vectors by (..., 4) unit quaternions (the leading axes broadcast)."""
+    shape = np.broadcast_shapes(q.shape[:-1], v.shape[:-1]) + (3,)
+    u = np.broadcast_to(q[..., :3], shape)
+    t = 2.0 * cross(u, np.broadcast_to(v, shape))
+    return v + q[..., 3:4] * t + cross(u, t)
 
 
 def to_matrix(q: np.ndarray) -> np.ndarray:
@@ -110,7 +110,7 @@ def log_map(q: np.ndarray) -> np.ndarray:
     """Rotation vectors (axis * angle, radians, (..., 3)) of unit quaternions, shortest arc."""
     q = np.where(q[..., 3:4] < 0, -q, q)
     v = q[..., :3]
-    s = np.linalg.norm(v, axis=-1, keepdims=True)
+    s = np.sqrt(np.sum(v * v, axis=-1, keepdims=True))  # not np.linalg.norm: cheaper on small batches
     angle = 2.0 * np.arctan2(s, q[..., 3:4])
     scale = np.where(s > 1e-9, angle / np.maximum(s, 1e-12), 2.0)
     return v * scale
@@ -118,7 +118,7 @@ def log_map(q: np.ndarray) -> np.ndarray:
 
 def exp_map(r: np.ndarray) -> np.ndarray:
     """Unit quaternions of rotation vectors (..., 3)."""
-    angle = np.linalg.norm(r, axis=-1, keepdims=True)
+    angle = np.sqrt(np.sum(r * r, axis=-1, keepdims=True))
     half = 0.5 * angle
     scale = np.where(angle > 1e-9, np.sin(half) / np.maximum(angle, 1e-12), 0.5)
     return np.concatenate([r * scale, np.cos(half)], axis=-1)
@@ -149,6 +149,9 @@ def yaw_about_y(q: np.ndarray, forward: np.ndarray = X_AXIS) -> np.ndarray:
 
     A rotation Ry(theta) maps +x to (cos theta, 0, -sin theta), so theta = atan2(-f_z, f_x).
     """
+    if forward is X_AXIS:  # the default, by components (the srb control loop calls this every step)
+        x, y, z, w = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
+        return np.arctan2(-2.0 * (x * z - y * w), 1.0 - 2.0 * (y * y + z * z))
     f = rotate(q, np.broadcast_to(forward, q.shape[:-1] + (3,)))
     return np.arctan2(-f[..., 2], f[..., 0])
 
@@ -156,6 +159,24 @@ def yaw_about_y(q: np.ndarray, forward: np.ndarray = X_AXIS) -> np.ndarray:
 def heading_quat(theta: np.ndarray) -> np.ndarray:
     """Quaternion of a rotation by theta (radians) about world +y."""
     return from_axis_angle(np.array([0.0, 1.0, 0.0]), theta)
+
+
+def rotate_yaw(theta: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Rotate (N, ..., 3) vectors about +y by theta (N,) radians: x' = c x + s z, z' = -s x + c z
+    (= rotate(heading_quat(theta), v), by components)."""
+    shape = theta.shape + (1,) * (v.ndim - 1 - theta.ndim)
+    c, s = np.cos(theta).reshape(shape), np.sin(theta).reshape(shape)
+    out = np.empty(np.broadcast_shapes(v.shape, shape + (3,)))
+    out[..., 0] = c * v[..., 0] + s * v[..., 2]
+    out[..., 1] = v[..., 1]
+    out[..., 2] = -s * v[..., 0] + c * v[..., 2]
+    return out
+
+
+def up_y(q: np.ndarray) -> np.ndarray:
+    """World y component of the body's +y axis (the cosine of its tilt from upright)."""
+    x, z = q[..., 0], q[..., 2]
+    return 1.0 - 2.0 * (x * x + z * z)
 
 
 def mirror_z(q: np.ndarray) -> np.ndarray:

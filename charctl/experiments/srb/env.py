@@ -29,7 +29,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from charctl.experiments.srb import fastmath as F
 from charctl.experiments.srb.qp import N_POINTS, QPBatch, QPParams, solve_batch
 from charctl.experiments.srb.reference import (
     Reference,
@@ -64,7 +63,7 @@ def make_body(clip, mass: float, frame: int = 0) -> Body:
 
 
 def heading_of(rot: np.ndarray) -> np.ndarray:
-    return F.yaw_of(rot)
+    return R.yaw_about_y(rot)
 
 
 def wrap_angle(a: np.ndarray) -> np.ndarray:
@@ -73,12 +72,12 @@ def wrap_angle(a: np.ndarray) -> np.ndarray:
 
 def to_heading(yaw: np.ndarray, v: np.ndarray) -> np.ndarray:
     """World vectors (N, ..., 3) into the heading frame of yaw (N,) radians."""
-    return F.rotate_yaw(-yaw, v)
+    return R.rotate_yaw(-yaw, v)
 
 
 def from_heading(yaw: np.ndarray, v: np.ndarray) -> np.ndarray:
     """Heading-frame vectors (N, ..., 3) into the world frame."""
-    return F.rotate_yaw(yaw, v)
+    return R.rotate_yaw(yaw, v)
 
 
 @dataclass(frozen=True)
@@ -211,7 +210,7 @@ class SRBEnv:
         self.delay[idx] = 0
         k, i = self.ref.split(frames)
         self.foot_pos[idx] = (
-            F.rotate_yaw(self.ref.cycle_yaws[k], self.ref.foot_mid[i]) + self.ref.cycle_shifts[k][:, None, :]
+            R.rotate_yaw(self.ref.cycle_yaws[k], self.ref.foot_mid[i]) + self.ref.cycle_shifts[k][:, None, :]
         )
         self.foot_yaw[idx] = self.ref.foot_yaw[i] + self.ref.cycle_yaws[k][:, None]
         self.stance[idx] = self.ref.stance[i]
@@ -223,7 +222,7 @@ class SRBEnv:
         yaw = heading_of(self.rot)
         obs = np.empty((self.num_envs, 20))
         obs[:, 0] = self.pos[:, 1]
-        obs[:, 1:5] = F.qmul(F.yaw_quat(-yaw), self.rot)
+        obs[:, 1:5] = R.multiply(R.heading_quat(-yaw), self.rot)
         obs[:, 5:8] = to_heading(yaw, self.vel)
         obs[:, 8:11] = to_heading(yaw, self.ang_vel)
         feet = to_heading(yaw, self.foot_pos - self.pos[:, None, :])
@@ -270,14 +269,14 @@ class SRBEnv:
         p = self.p
         v_d = target["vel"] + from_heading(target["yaw"], rel_vel)
         w_d = target["ang_vel"] + from_heading(target["yaw"], rel_ang)
-        rot_err = F.log_map(F.qmul(target["rot"], F.qconj(self.rot)))
+        rot_err = R.log_map(R.multiply(target["rot"], R.conjugate(self.rot)))
         acc = np.empty((self.num_envs, 6))
         acc[:, :3] = p.kp * (target["pos"] - self.pos) + p.kd * (v_d - self.vel)
         acc[:, 3:] = p.kp * rot_err + p.kd * (w_d - self.ang_vel)
         return np.clip(acc, p.acc_min, p.acc_max)
 
     def world_inertia(self) -> np.ndarray:
-        m = F.to_matrix(self.rot)
+        m = R.to_matrix(self.rot)
         return m @ self.body.inertia @ m.transpose(0, 2, 1)
 
     def advance_body(
@@ -297,7 +296,7 @@ class SRBEnv:
         self.vel += h * lin
         self.pos += h * self.vel
         self.ang_vel += h * out["qdd"][:, 3:]
-        self.rot = F.normalize(F.qmul(F.exp_map(self.ang_vel * h), self.rot))
+        self.rot = R.normalize(R.multiply(R.exp_map(self.ang_vel * h), self.rot))
         self.stats["qp_solves"] += self.num_envs
         self.stats["qp_failures"] += int((out["flags"] < 0).sum())
         return out
@@ -349,7 +348,7 @@ class SRBEnv:
         y_ref = self.ref.state(self.frame)["pos"][:, 1]
         lo = np.minimum(p.min_height_ratio * y_ref, p.min_height_abs)
         y = self.pos[:, 1]
-        return (y < lo) | (y > p.max_height) | (F.up_y(self.rot) < np.cos(p.max_tilt))
+        return (y < lo) | (y > p.max_height) | (R.up_y(self.rot) < np.cos(p.max_tilt))
 
     def mimic_terms(self, before: dict, frame0: np.ndarray) -> dict[str, np.ndarray]:
         """Weighted squared errors of paper §5.2's pose, end-effector and velocity terms for the step
@@ -360,9 +359,9 @@ class SRBEnv:
         d_srb = to_heading(yaw0, self.pos - before["pos"])
         d_ref = to_heading(ryaw0, r1["pos"] - r0["pos"])
         d_err = np.sum((d_srb - d_ref) ** 2, -1)
-        q_srb = F.qmul(F.yaw_quat(-yaw0), self.rot)
-        q_ref = F.qmul(F.yaw_quat(-ryaw0), r1["rot"])
-        pose = p.k_disp * d_err + p.k_rot * F.quat_angle(q_srb, q_ref) ** 2
+        q_srb = R.multiply(R.heading_quat(-yaw0), self.rot)
+        q_ref = R.multiply(R.heading_quat(-ryaw0), r1["rot"])
+        pose = p.k_disp * d_err + p.k_rot * R.angle_between(q_srb, q_ref) ** 2
         pts = to_heading(yaw0, before["points"] - before["pos"][:, None, :]).reshape(-1, 2, 2, 3)
         err = np.sum((pts - ref.sole_local[frame0 % ref.cycle]) ** 2, -1).sum(-1)  # (N, 2)
         ee = p.k_ee * (np.sum(np.where(before["stance"], err, 0.0), -1) + d_err)

@@ -8,8 +8,8 @@ import math
 
 import numpy as np
 
-from charctl.experiments.srb import fastmath as F
 from charctl.experiments.srb.push import PushCase, iter_chunks, window_fraction
+from charctl.motion import rotations as R
 
 CHUNK = 512  # push episodes stepped together per SRBEnv
 
@@ -72,7 +72,7 @@ def simulate_chunk(env, model, chunk, init_noise: float, act, record: bool, seco
             opening = ~np.isfinite(start) & (t >= settle) & (crossed | (np.abs((u - phase) % 1.0) < 1e-9))
             if opening.any():
                 start[opening] = t
-                a = F.yaw_of(env.rot) + direction
+                a = R.yaw_about_y(env.rot) + direction
                 push_dir[opening] = np.stack([np.cos(a), np.zeros_like(a), -np.sin(a)], axis=-1)[opening]
         u_prev = u
         frac = window_fraction(np.full(n, t), dt, start, duration)
