@@ -36,21 +36,24 @@ repro-cgail-10skill-kl: install ## cgail: the fifth ten-skill run, KL-targeting 
 	$(CHARCTL) train cgail --resume $$C train.total_samples=40000000 train.overlap_update=true && \
 	$(VENV)/bin/python scripts/eval_checkpoints.py $$C --after 15000000
 
-# The fidelity recipe's two 3-skill runs (docs/cgail.md, "Fidelity recipe"): A = per-skill style head, wrong-skill
+# The fidelity recipe's 3-skill runs (docs/cgail.md, "Fidelity recipe"): A = per-skill style head, wrong-skill
 # fakes, class head on demonstrations only (w_S 0.8, w_C 0.2, r_C = P(command)), KL-targeting PPO rate; B = A's
-# run forked at its 5,005,312-sample checkpoint and continued with early termination on a low style reward.
+# run forked at its 5,005,312-sample checkpoint and continued with early termination on a low style reward to
+# 23,724,032 samples; C = B continued with early termination on a large pose error (0.5 m) to 4e7 samples.
 CGAIL_FID := outputs/repro/cgail-fidelity
 CGAIL_FID_RECIPE := disc.style_head=per_skill disc.wrong_skill_fakes=0.25 cgail.class_on_policy=false reward.w_style=0.8 reward.w_class=0.2 reward.class_form=prob ppo.desired_kl=0.02 ppo.lr_max=1e-4 train.checkpoint_every=20 train.keep_checkpoint_every=2500000 seed=1
 CGAIL_FID_SAMPLES ?= 40000000
 
 .PHONY: repro-cgail-fidelity
-repro-cgail-fidelity: install ## cgail: the fidelity recipe's runs A and B (3 skills; to CGAIL_FID_SAMPLES each, ~3 h each on 2 cores), fidelity of every kept checkpoint
+repro-cgail-fidelity: install ## cgail: the fidelity recipe's runs A, B and C (3 skills; ~5 h on 2 cores), fidelity of every kept checkpoint
 	$(CHARCTL) train cgail scale=small $(CGAIL_FID_RECIPE) train.total_samples=5005312 output_root=$(CGAIL_FID)/A
 	A=$$(ls -d $(CGAIL_FID)/A/cgail/*/ | tail -1); B=$(CGAIL_FID)/B/cgail/$$(basename $$A); \
 	mkdir -p $$B/checkpoints && cp $$A/config.yaml $$B/ && cp $$A/checkpoints/last.pt $$B/checkpoints/last.pt && \
-	$(CHARCTL) train cgail --resume $$A train.total_samples=$(CGAIL_FID_SAMPLES) && \
-	$(CHARCTL) train cgail --resume $$B reward.low_style_threshold=0.05 reward.low_style_steps=10 train.total_samples=$(CGAIL_FID_SAMPLES) && \
-	$(VENV)/bin/python scripts/eval_checkpoints.py $$A --rank fidelity && $(VENV)/bin/python scripts/eval_checkpoints.py $$B --rank fidelity
+	$(CHARCTL) train cgail --resume $$A train.total_samples=7500000 && \
+	$(CHARCTL) train cgail --resume $$B reward.low_style_threshold=0.05 reward.low_style_steps=10 train.fidelity_every=1000000 train.total_samples=23724032 && \
+	C=$(CGAIL_FID)/C/cgail/$$(basename $$A); mkdir -p $$C && cp -r $$B/config.yaml $$B/checkpoints $$B/tb $$C/ && \
+	$(CHARCTL) train cgail --resume $$C reward.pose_error_threshold=0.5 train.total_samples=$(CGAIL_FID_SAMPLES) && \
+	$(VENV)/bin/python scripts/eval_checkpoints.py $$B --rank fidelity && $(VENV)/bin/python scripts/eval_checkpoints.py $$C --rank fidelity
 
 .PHONY: repro-cgail-tracking-3skill
 repro-cgail-tracking-3skill: install ## cgail: the multi-skill tracking baseline (walk, run, right_kick; command and phase in the state), the fidelity anchor; not yet trained to the end here
