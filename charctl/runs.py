@@ -16,7 +16,6 @@ signature, and loading one into another experiment (or another network shape) is
 from __future__ import annotations
 
 import contextlib
-import errno
 import json
 import math
 import os
@@ -34,13 +33,6 @@ from typing import Any
 from charctl.errors import CharctlError, Interrupted
 
 CHECKPOINT_FORMAT = 1
-# Fault-injection hooks for the test suite (tests/test_faults.py); unset in normal use.
-#   CHARCTL_FAULT_CHECKPOINT_DELAY=S   sleep S seconds in the middle of every checkpoint write (the
-#                                      temp file is half written), so a SIGKILL can land inside it
-#   CHARCTL_FAULT_CHECKPOINT_ENOSPC=N  checkpoint writes after the first N fail with ENOSPC (disk full)
-FAULT_DELAY_ENV = "CHARCTL_FAULT_CHECKPOINT_DELAY"
-FAULT_ENOSPC_ENV = "CHARCTL_FAULT_CHECKPOINT_ENOSPC"
-_checkpoints_written = 0
 # `charctl tune` (charctl.launch.tune) sets this to a file: every scalar set a run logs, and its final
 # metrics.json numbers, are appended there as one JSON line each, which the tuner reads as the run goes.
 METRICS_STREAM_ENV = "CHARCTL_METRICS_STREAM"
@@ -335,9 +327,6 @@ def save_checkpoint(
     file, keeps the previous checkpoint and is a one-line `CharctlError`. `tb_step` is the last
     TensorBoard step logged before this checkpoint (a resumed run purges later steps).
     """
-    import torch
-
-    global _checkpoints_written
     path = Path(path)
     payload = {
         "format": CHECKPOINT_FORMAT,
@@ -353,10 +342,7 @@ def save_checkpoint(
             path.parent.mkdir(parents=True, exist_ok=True)
             try:
                 with open(tmp, "wb") as fh:
-                    if os.environ.get(FAULT_DELAY_ENV) or os.environ.get(FAULT_ENOSPC_ENV):
-                        _write_with_faults(fh, payload, tmp)
-                    else:
-                        torch.save(payload, fh)
+                    _save_payload(fh, payload)
                     fh.flush()
                     os.fsync(fh.fileno())
                 os.replace(tmp, path)
@@ -367,30 +353,15 @@ def save_checkpoint(
     except OSError as exc:
         kept = "; the previous checkpoint is kept" if path.is_file() else ""
         raise CharctlError(f"cannot write checkpoint {path}: {exc.strerror or exc}{kept}") from None
-    _checkpoints_written += 1
     return path
 
 
-def _write_with_faults(fh, payload: dict, tmp: Path) -> None:
-    """Test-only faults (FAULT_DELAY_ENV / FAULT_ENOSPC_ENV): a slow write that pauses with the temp
-    file half written, or a write that fails with ENOSPC after a part of the file is on disk."""
-    import io
-
+def _save_payload(fh, payload: dict) -> None:
+    """Serialise a checkpoint payload into the open temp file `fh` (the test suite's fault hooks,
+    tests/fault_hooks/sitecustomize.py, replace this function to stall or fail a write half-way)."""
     import torch
 
-    buf = io.BytesIO()
-    torch.save(payload, buf)
-    data = buf.getvalue()
-    half = len(data) // 2
-    fh.write(data[:half])
-    fh.flush()
-    limit = os.environ.get(FAULT_ENOSPC_ENV)
-    if limit and _checkpoints_written >= int(limit):
-        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), str(tmp))
-    delay = os.environ.get(FAULT_DELAY_ENV)
-    if delay:
-        time.sleep(float(delay))
-    fh.write(data[half:])
+    torch.save(payload, fh)
 
 
 def load_checkpoint(path: Path, experiment: str, signature: dict | None = None, payload: bool = False) -> dict:

@@ -23,12 +23,25 @@ VENV_BIN = Path(sys.executable).parent
 CHARCTL = VENV_BIN / "charctl"
 
 
+FAULT_HOOKS = REPO / "tests" / "fault_hooks"  # sitecustomize.py: CHARCTL_FAULT_* checkpoint faults
+
+
+def with_fault_hooks(env: dict[str, str]) -> dict[str, str]:
+    """`env` with the fault hooks on PYTHONPATH when it sets a CHARCTL_FAULT_* variable (a subprocess
+    then imports tests/fault_hooks/sitecustomize.py at start-up, which installs the faults)."""
+    if any(k.startswith("CHARCTL_FAULT_") for k in env):
+        inherited = env.get("PYTHONPATH", os.environ.get("PYTHONPATH", ""))
+        env = {**env, "PYTHONPATH": os.pathsep.join(filter(None, [str(FAULT_HOOKS), inherited]))}
+    return env
+
+
 def cli_env(**extra: str) -> dict[str, str]:
-    """Environment for a charctl subprocess: wide, colourless rich output, no GPU/renderer surprises."""
+    """Environment for a charctl subprocess: wide, colourless rich output, no GPU/renderer surprises;
+    CHARCTL_FAULT_* variables in `extra` switch the test-only checkpoint faults on (`with_fault_hooks`)."""
     env = dict(os.environ)
     env.update({"COLUMNS": "250", "NO_COLOR": "1", "TERM": "dumb", "OMP_NUM_THREADS": "1"})
     env.update(extra)
-    return env
+    return with_fault_hooks(env)
 
 
 def run_charctl(

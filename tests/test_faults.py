@@ -9,9 +9,10 @@
 - a full disk (ENOSPC injected into the checkpoint writer): one line, the previous checkpoint intact;
 - a diverging run: non-zero exit, the last checkpoint finite, metrics.json strict JSON.
 
-The fault hooks are environment variables of charctl.runs (CHARCTL_FAULT_CHECKPOINT_DELAY,
-CHARCTL_FAULT_CHECKPOINT_ENOSPC). cgail / srb cases whose behaviour depends on the shared
-on-policy runner (charctl/rl/runner.py) run like every other case.
+The checkpoint faults (CHARCTL_FAULT_CHECKPOINT_DELAY, CHARCTL_FAULT_CHECKPOINT_ENOSPC) live in
+tests/fault_hooks/sitecustomize.py, which `cli_env` puts on the subprocess's PYTHONPATH. cgail / srb
+cases whose behaviour depends on the shared on-policy runner (charctl/rl/runner.py) run like every
+other case.
 """
 
 from __future__ import annotations

@@ -23,7 +23,7 @@ import pytest
 from charctl.errors import CharctlError
 from charctl.launch.search_space import Dim, format_value, parse_dim, parse_overrides, split_args
 
-from conftest import REPO, assert_one_line, assert_one_line_error, cli_env
+from conftest import REPO, assert_one_line, assert_one_line_error, cli_env, with_fault_hooks
 
 ray = pytest.importorskip("ray")
 
@@ -188,7 +188,7 @@ def test_a_job_failing_at_run_time_reports_its_one_line(tmp_path):
         "hopper-ga",
         ("scale=smoke", f"output_root={tmp_path}"),
         cwd=str(REPO),
-        env={"CHARCTL_FAULT_CHECKPOINT_ENOSPC": "0", "OMP_NUM_THREADS": "1"},
+        env=with_fault_hooks({"CHARCTL_FAULT_CHECKPOINT_ENOSPC": "0", "OMP_NUM_THREADS": "1"}),
     )
     job = ChildJob(spec)
     job.start()
