@@ -209,11 +209,20 @@ def play(target: str = typer.Argument(..., help="run directory, or an experiment
 def show_config(
     experiment: str = typer.Argument(..., help="experiment name"),
     overrides: list[str] | None = OverridesArg,
+    explain: str | None = typer.Option(
+        None,
+        "--explain",
+        help="KEY or section (e.g. reward): each knob's help, type, default, value and the layer that set it",
+        show_default=False,
+    ),
 ) -> None:
-    """Print the resolved, validated config of an experiment."""
-    from charctl.commands.train import print_config
+    """Print the resolved, validated config of an experiment (or, with --explain, what its knobs mean)."""
+    from charctl.commands.train import explain_config, print_config
 
-    print_config(experiment, list(overrides or []))
+    if explain is not None:
+        explain_config(experiment, explain, list(overrides or []))
+    else:
+        print_config(experiment, list(overrides or []))
 
 
 _TERMINATED = []  # set by the SIGTERM handler: a KeyboardInterrupt that was really a SIGTERM

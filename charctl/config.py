@@ -29,7 +29,7 @@ from charctl.errors import CharctlError
 class BaseConfig:
     """Keys every experiment has."""
 
-    experiment: str = "???"
+    experiment: str = "???"  # the experiment this config belongs to (the positional argument sets it)
     scale: str = "small"  # smoke | small | paper
     seed: int = 0  # every RNG (numpy, torch, env resets) derives from this
     output_root: str = "outputs"  # run directories go to <output_root>/<experiment>/<timestamp>/

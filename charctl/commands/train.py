@@ -129,6 +129,14 @@ def _report_mujoco_warnings(run) -> None:
         )
 
 
+def explain_config(experiment: str, key: str, overrides: list[str]) -> None:
+    from charctl.config import check_experiment
+    from charctl.config_help import explain
+
+    check_experiment(experiment)
+    print(explain(experiment, key, overrides, _schema(experiment)))
+
+
 def print_config(experiment: str, overrides: list[str]) -> None:
     from charctl.config import compose_config, to_yaml
 

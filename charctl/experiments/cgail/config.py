@@ -59,7 +59,7 @@ class EnvConfig:
     # curriculum_start_seconds at first, the limit growing linearly to episode_seconds over
     # curriculum_samples samples. 0 = off (every episode may last episode_seconds). docs/cgail.md, "Ablation".
     curriculum_start_seconds: float = 0.0
-    curriculum_samples: int = 2_000_000
+    curriculum_samples: int = 2_000_000  # samples over which the episode limit grows to episode_seconds
     ramp_frames: int = 60  # eq 4.10-4.11: linear command ramp length (control frames); 0 = switch in one frame
     switch_prob: float = 0.01  # per control step, probability of re-sampling the command within an episode
     # Fall-weighted commands (prioritised sampling of hard motions, as ProtoMotions/PHC do): this share of
@@ -86,7 +86,7 @@ class RewardConfig:
     # when r_S of its pairs, scored for its command, stayed below this for low_style_steps control steps in a row.
     # 0 = off (the paper). CPU env only. charctl.experiments.cgail.termination; docs/cgail.md, "Fidelity recipe".
     low_style_threshold: float = 0.0
-    low_style_steps: int = 10
+    low_style_steps: int = 10  # consecutive control steps below low_style_threshold that end an episode
     # Early termination on a large pose error against the commanded clip's timed reference (DeepMimic-style
     # tracking termination; the reward stays adversarial). From an RSI the reference runs on from the start frame
     # (a non-looping clip restarts at frame 0 when it ends); after a command switch it starts at frame 0 once the
@@ -142,8 +142,8 @@ class TrainConfig:
     # samples between checkpoints also kept as checkpoints/samples_<n>.pt beside last.pt, so any of them can
     # be evaluated later (charctl eval RUN --checkpoint samples_<n>.pt); 0 = only last.pt
     keep_checkpoint_every: int = 0
-    log_every: int = 1
-    torch_threads: int = 2
+    log_every: int = 1  # iterations between TensorBoard / progress updates
+    torch_threads: int = 2  # torch intra-op threads of the updates (the rollout's policy forward uses one)
     # Overlap each iteration's rollout with the previous rollout's PPO and discriminator updates, run in a
     # second thread (CPU env only; with env.backend=warp the loop runs in turn). The rollout then acts with
     # the policy of one update earlier, and PPO corrects for it with the decoupled objective (clip around
@@ -160,7 +160,7 @@ class TrainConfig:
 @dataclass
 class Config(BaseConfig):
     experiment: str = "cgail"
-    skills: list[SkillConfig] = field(default_factory=paper_skills)
+    skills: list[SkillConfig] = field(default_factory=paper_skills)  # the commandable skills: name, clip, heading goal
     use_skills: list[str] = field(default_factory=list)  # subset of skill names to train (empty = all), e.g. [walk]
     env: EnvConfig = field(default_factory=EnvConfig)
     ppo: PPOConfig = field(default_factory=paper_ppo)

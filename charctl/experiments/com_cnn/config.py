@@ -87,6 +87,7 @@ class DataConfig:
     bvh_dir: str = ""  # a folder of .bvh files (any skeleton, y-up) replaces the DeepMimic clips when set
     clips: list[str] = field(default_factory=lambda: list(ALL_CLIPS))  # DeepMimic clips used (train + test)
     mirror: bool = True  # add the left/right mirrored copy of every DeepMimic clip (same split side)
+    # held-out clips (never trained on; their mirrors are held out too)
     test_clips: list[str] = field(default_factory=lambda: ["walker/turn_right1", "crawl", "dance_b", "getup_faceup"])
     fps: float = 30.0  # paper §3.2: every clip resampled to 30 fps
     history: int = 90  # i, frames in M_t = {m_{t-i} .. m_{t-1}} (paper Table 4 best: 90)
@@ -129,11 +130,11 @@ class TrainConfig:
     optimizer: str = "sgd"  # paper §4: SGD | adam | adamw
     lr: float = 0.01  # paper silent
     momentum: float = 0.9  # SGD momentum (paper silent)
-    weight_decay: float = 0.0
+    weight_decay: float = 0.0  # L2 weight decay of the optimiser (paper silent)
     grad_clip: float = 10.0  # global gradient-norm clip (0 = off)
     eval_every: int = 500  # steps between held-out losses in TensorBoard
     checkpoint_every: int = 1000  # steps between checkpoints (and one at the end / on Ctrl-C)
-    torch_threads: int = 2
+    torch_threads: int = 2  # torch intra-op threads
 
 
 @dataclass
@@ -142,6 +143,7 @@ class EvalConfig:
     motion_types: dict[str, list[str]] = field(
         default_factory=lambda: {"walk": ["walk", "turn"], "crouch_walk": ["crawl"]}
     )
+    # the paper's Table 5 errors per motion type, printed beside ours
     paper_table5: dict[str, float] = field(
         default_factory=lambda: {"walk": 0.415, "crouch_walk": 0.614, "other": 1.567}
     )

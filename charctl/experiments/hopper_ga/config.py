@@ -69,7 +69,7 @@ class CharacterConfig:
     shank_mass: float = 0.061  # fraction, per leg (shank + foot)
     thigh_com: float = 0.433  # COM along the thigh from the hip
     shank_com: float = 0.5  # COM along the shank from the knee
-    upper: list[SegmentConfig] = field(default_factory=_default_upper)
+    upper: list[SegmentConfig] = field(default_factory=_default_upper)  # upper-body segments (mass, length)
 
 
 @dataclass

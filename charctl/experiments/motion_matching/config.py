@@ -37,7 +37,7 @@ class DataConfig:
     # its past/future trajectory and playback can run on. Only one cycle per clip is searchable
     # (the others are exact repeats). Paper: silent (its data is one long take).
     loop_cycles_before: int = 1
-    loop_cycles_after: int = 4
+    loop_cycles_after: int = 4  # unrolled cycles after the searchable one (see loop_cycles_before)
     # DeepMimic loops do not close exactly (seam jumps up to ~50 deg in the neck of turn_right0): the
     # seam residual of every joint is spread linearly over the cycle before unrolling.
     close_loops: bool = True
@@ -92,7 +92,7 @@ class PathConfig:
     speed: float = 0.9  # m/s of the target point; the database walks at 0.8-1.0 m/s (run: 3.6), 1.0 lags on curves
     circle_radius: float = 3.0  # m
     square_side: float = 5.0  # m
-    star_points: int = 5
+    star_points: int = 5  # tips of the star path
     star_outer: float = 3.0  # m, tip radius
     star_inner: float = 1.5  # m, radius of the inner corners
     laps: float = 1.0  # how far the target travels: laps of a closed path (open CSV paths: to the end)
@@ -105,7 +105,7 @@ class PathConfig:
 class SweepConfig:
     """`charctl eval motion-matching --sweep`: Table 1 cases on the three paths."""
 
-    paths: list[str] = field(default_factory=lambda: ["circle", "square", "star"])
+    paths: list[str] = field(default_factory=lambda: ["circle", "square", "star"])  # target paths swept
     cases: list[int] = field(default_factory=list)  # empty = all 19
     # Rollouts per path, started at evenly spaced gait phases of the best-matching clip; errors are
     # pooled over their frames. One rollout is chaotic (a 2% change of speed moves a case's mean

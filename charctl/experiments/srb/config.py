@@ -68,7 +68,7 @@ class ActionConfig:
 class TouchdownConfig:
     """Early / late touch-down handling by shifting the reference frame (paper §6)."""
 
-    enabled: bool = True
+    enabled: bool = True  # shift the reference at early / late touch-downs (off: the reference runs on its clock)
     late_margin: float = 0.0  # m: late when y_srb > y_ref + margin at a scheduled touch-down -> the reference waits
     max_delay: int = 6  # frames the reference may wait for one touch-down (decision; the paper gives none)
     early_margin: float = 0.03  # m: early when y_srb < (ref pelvis height at touch-down) - margin during swing
@@ -138,7 +138,7 @@ class TrainConfig:
     num_envs: int = 32  # environments stepped together
     rollout_steps: int = 32  # steps per env per update: num_envs * rollout_steps = samples per update (paper: 1024)
     checkpoint_every: int = 20  # iterations between checkpoints
-    torch_threads: int = 1
+    torch_threads: int = 1  # torch intra-op threads of the PPO update
 
 
 def default_ppo() -> PPOConfig:
