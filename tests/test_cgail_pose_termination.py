@@ -66,8 +66,9 @@ def test_looping_clips_are_scored_against_their_closest_frame_and_others_against
     env.cmd[:] = [0, 1]
     obs = np.stack([skills[0].obs[17], skills[1].obs[20]])
     env.ref_frame[:] = [3, 3]  # walk: frame 17 is still a walk pose (0 error); kick: frame 3 is not frame 20
-    err = env._pose_error(obs, env._reference_obs())
-    assert err[0] == pytest.approx(0.0, abs=1e-12)
+    err, scored = env._pose_error(obs, env._reference_obs())
+    assert err[0] == pytest.approx(0.0, abs=1e-12) and np.array_equal(scored[0], skills[0].obs[17])
+    assert np.array_equal(scored[1], skills[1].obs[3])
     assert err[1] == pytest.approx(reference_pose_error(obs[1:], skills[1].obs[3:4])[0]) and err[1] > 0.5
 
 
@@ -119,3 +120,28 @@ def test_config_errors(overrides, message):
 
     cfg = OmegaConf.merge(OmegaConf.structured(Config), overrides)
     assert message in Config.check(cfg)
+
+
+def test_reference_reward_is_the_tracking_reward_where_the_reference_is_checked(skills):
+    """reward.w_track: r_track against the pose-error reference, 0 for an env whose check is off (grace)."""
+    from charctl.experiments.cgail.env import tracking_reward
+
+    cfg = OmegaConf.structured(EnvConfig(num_envs=2, ramp_frames=4, switch_prob=0.0))
+    env = CgailEnv(skills, cfg, seed=0, pose_error_threshold=10.0, pose_error_grace_steps=5, reference_reward=True)
+    env.forced_command = np.array([1, 1])
+    env.start_frame = 3
+    env.reset(np.arange(2))
+    env.ref_grace[1] = 3  # env 1 unchecked this step
+    res = env.step(np.zeros((2, 28)))
+    want = tracking_reward(res.pair_next[:1], skills[1].obs[4:5])[0]  # RSI frame 3 -> reference frame 4
+    assert res.r_track[0] == pytest.approx(want) and 0.0 < want <= 1.0
+    assert res.r_track[1] == 0.0
+
+
+def test_w_track_needs_the_pose_error_reference():
+    from charctl.experiments.cgail.config import Config
+
+    cfg = OmegaConf.merge(OmegaConf.structured(Config), {"reward": {"w_track": 0.5}})
+    assert "reward.w_track" in Config.check(cfg)
+    cfg = OmegaConf.merge(cfg, {"reward": {"pose_error_threshold": 0.5}})
+    assert Config.check(cfg) is None

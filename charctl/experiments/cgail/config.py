@@ -95,6 +95,11 @@ class RewardConfig:
     # that follow each restart. 0 = off (the paper). CPU env only. docs/cgail.md, "Fidelity recipe".
     pose_error_threshold: float = 0.0
     pose_error_grace_steps: int = 10  # control steps after a reference restart with no check (time to reach frame 0)
+    # Weight w_T of a DeepMimic tracking reward (env.tracking_reward, in [0, 1]) against the pose-error check's
+    # reference (the timed frame of a non-looping clip, the closest frame of a looping one), added to eq 4.1
+    # where the reference is checked (0 during ramps and grace steps). Needs pose_error_threshold > 0.
+    # 0 = off (the paper). docs/cgail.md, "Fidelity recipe".
+    w_track: float = 0.0
 
 
 @dataclass
@@ -196,6 +201,8 @@ class Config(BaseConfig):
             return "reward.pose_error_threshold and reward.pose_error_grace_steps must be >= 0"
         if cfg.reward.pose_error_threshold > 0 and (cfg.env.backend != "cpu" or cfg.reward.kind != "adversarial"):
             return "reward.pose_error_threshold > 0 needs env.backend=cpu and reward.kind=adversarial"
+        if cfg.reward.w_track < 0 or (cfg.reward.w_track > 0 and cfg.reward.pose_error_threshold <= 0):
+            return "reward.w_track must be >= 0, and > 0 only with reward.pose_error_threshold > 0 (its reference)"
         n_skills = len(cfg.use_skills) if cfg.use_skills else len(cfg.skills)
         if cfg.reward.kind == "tracking" and n_skills > 1 and cfg.env.switch_prob > 0:
             return (

@@ -120,11 +120,13 @@ class CgailEnv:
         tracking: bool = False,
         pose_error_threshold: float = 0.0,
         pose_error_grace_steps: int = 10,
+        reference_reward: bool = False,
     ):
         self.skills = skills
         self.tracking = tracking  # phase in the state, reference frame advanced every step
         # training only (reward.pose_error_threshold): end episodes that leave the clip's timed reference
         self.pose_threshold, self.pose_grace = float(pose_error_threshold), int(pose_error_grace_steps)
+        self.reference_reward = bool(reference_reward)  # r_track against that reference (reward.w_track)
         self.cfg = env_cfg = plain_section(env_cfg)  # typed fields, cheap reads in the step loop
         self.K = len(skills)
         self.conditional = conditional
@@ -286,16 +288,18 @@ class CgailEnv:
         self.ref_grace = np.where(restart, self.pose_grace, np.maximum(self.ref_grace - 1, 0))
         return self._reference_obs()
 
-    def _pose_error(self, obs: np.ndarray, ref: np.ndarray) -> np.ndarray:
-        """(N,) m: `reference_pose_error` against the timed reference `ref` for non-looping clips, and
-        against the clip's closest frame for looping ones (locomotion: a cadence of its own is no error)."""
-        err = reference_pose_error(obs, ref)
+    def _pose_error(self, obs: np.ndarray, ref: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """((N,) m, (N, 133)): `reference_pose_error` against the timed reference `ref` for non-looping clips,
+        and against the clip's closest frame for looping ones (locomotion: a cadence of its own is no error);
+        with the reference each env was scored against."""
+        err, ref = reference_pose_error(obs, ref), ref.copy()
         for s in np.unique(self.cmd[self.clip_loops[self.cmd]]):
             m = np.flatnonzero(self.cmd == s)
             clip = self.skills[s].obs
             each = reference_pose_error(np.repeat(obs[m], len(clip), axis=0), np.tile(clip, (len(m), 1)))
-            err[m] = each.reshape(len(m), len(clip)).min(axis=1)
-        return err
+            best = each.reshape(len(m), len(clip)).argmin(axis=1)
+            err[m], ref[m] = each.reshape(len(m), len(clip))[np.arange(len(m)), best], clip[best]
+        return err, ref
 
     def _restart_reference_after_ramp(self) -> None:
         """Envs whose command ramp has just finished: the new clip's reference starts at frame 0."""
@@ -335,7 +339,10 @@ class CgailEnv:
         pose_ended = np.zeros(self.N, dtype=bool)
         if self.pose_threshold > 0:
             checked = self.ref_active & (self.ref_grace == 0) & ~(fell | unstable)
-            pose_ended = checked & (self._pose_error(pair_next, ref) > self.pose_threshold)
+            err, scored = self._pose_error(pair_next, ref)
+            pose_ended = checked & (err > self.pose_threshold)
+            if self.reference_reward:  # reward.w_track: the tracking reward where the reference is checked
+                r_track = np.where(checked, tracking_reward(pair_next, scored), 0.0)
         terminated = fell | unstable | pose_ended
         self.steps += 1
         truncated = ((self.steps >= self.max_steps) | clip_ended) & ~terminated

@@ -365,12 +365,14 @@ def discriminator_rewards(agent: Agent, ro: Rollout) -> dict[str, torch.Tensor]:
 def total_reward(
     agent: Agent, rewards: dict, r_goal: torch.Tensor, r_track: torch.Tensor | None = None
 ) -> torch.Tensor:
-    """r = w_S r_S + w_C r_C + w_G r_G (eq 4.1); AMP baseline: no r_C; tracking baseline:
-    r = r_track + w_G r_G (the discriminator still trains, as a style diagnostic only)."""
+    """r = w_S r_S + w_C r_C + w_G r_G (eq 4.1), plus w_T r_track with reward.w_track; AMP baseline: no r_C;
+    tracking baseline: r = r_track + w_G r_G (the discriminator still trains, as a style diagnostic only)."""
     rc = agent.cfg.reward
     if rc.kind == "tracking":
         return r_track + rc.w_goal * r_goal
     r = rc.w_style * rewards["r_style"] + rc.w_goal * r_goal
+    if rc.w_track > 0 and r_track is not None:  # fidelity recipe: tracking reward against the pose-error reference
+        r = r + rc.w_track * r_track
     if agent.conditional:
         r = r + rc.w_class * rewards["r_class"]
     return r
@@ -517,6 +519,7 @@ class CgailLearner(AgentCounters):
                 tracking=cfg.reward.kind == "tracking",
                 pose_error_threshold=cfg.reward.pose_error_threshold,
                 pose_error_grace_steps=cfg.reward.pose_error_grace_steps,
+                reference_reward=cfg.reward.w_track > 0,
             )
         self.samples_per_iteration = cfg.train.rollout_steps * self.env.N
         self.episode_lengths: list = []
