@@ -513,6 +513,14 @@ def eval_curves(run_dirs: list[Path], out: Path) -> dict:
         ),
         "curves_episode_length.png": ("episode length (control steps)", ["train/episode_length"]),
     }
+    logged = sorted({t for _, _, scalars in runs for t in scalars})
+    for measure, title in (
+        ("coverage", "fidelity: pose coverage of the clip per skill"),
+        ("foot_peak", "fidelity: peak height of the higher foot (m) per skill"),
+    ):  # train.fidelity_every's fidelity/<skill>/<measure> scalars, where the runs logged them
+        tags = [t for t in logged if t.startswith("fidelity/") and t.endswith(f"/{measure}")]
+        if tags:
+            figs[f"curves_fidelity_{measure}.png"] = (title, tags)
     written = []
     for fname, (title, tags) in figs.items():
         fig, ax = new_figure(figsize=(7, 4))
@@ -521,7 +529,14 @@ def eval_curves(run_dirs: list[Path], out: Path) -> dict:
             for tag in tags:
                 if tag in scalars:
                     steps, vals = scalars[tag]
-                    ax.plot(steps, _smooth(vals), label=f"{label} {tag.split('/')[-1]}" if len(tags) > 1 else label)
+                    name = tag.split("/")[1] if tag.startswith("fidelity/") else tag.split("/")[-1]
+                    y = vals if tag.startswith("fidelity/") else _smooth(vals)  # sparse points: drawn as logged
+                    ax.plot(
+                        steps,
+                        y,
+                        marker="." if tag.startswith("fidelity/") else None,
+                        label=f"{label} {name}" if len(tags) > 1 else label,
+                    )
                     any_line = True
         ax.set_title(title)
         ax.set_xlabel("samples")
