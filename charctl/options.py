@@ -45,7 +45,7 @@ def check_numbers(options: dict[str, Any]) -> None:
 
 
 def check_outputs(options: dict[str, Any]) -> None:
-    from charctl.runs import check_output_file, check_writable_dir
+    from charctl.paths import check_output_file, check_writable_dir
 
     for name in OUTPUT_FILES:
         value = options.get(name)

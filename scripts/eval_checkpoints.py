@@ -38,7 +38,7 @@ import torch
 
 def kept_checkpoints(run_dir: Path) -> list[tuple[int, str]]:
     """(samples, file name) of RUN/checkpoints/samples_*.pt and last.pt, by sample count."""
-    from charctl.runs import KEPT_CHECKPOINT, load_checkpoint
+    from charctl.checkpoints import KEPT_CHECKPOINT, load_checkpoint
 
     found = []
     for p in sorted((run_dir / "checkpoints").glob("samples_*.pt")):
@@ -93,7 +93,7 @@ def evaluate_checkpoint(
     """No-fall and Fig 6.8 diagonal per skill of one checkpoint, and with `fidelity_k` > 0 its fidelity
     over that many episodes per skill (each part reused from out/row.json when its settings match)."""
     from charctl.experiments.cgail.evaluate import load_eval_run
-    from charctl.runs import atomic_write_text, strict_json
+    from charctl.files import atomic_write_text, strict_json
 
     row = cached_row(out, name, samples, seconds, k, ck, seed)
     tr = None
@@ -151,7 +151,7 @@ def survival_and_confusion(tr, name: str, seconds: float, k: int, ck: int, seed:
 
 
 def write_report(run_dir: Path, rows: list[dict], chosen: dict | None, confirm: dict | None, a) -> None:
-    from charctl.runs import atomic_write_text, strict_json
+    from charctl.files import atomic_write_text, strict_json
     from charctl.viz.plots import new_figure, save_figure
 
     out = run_dir / "eval"

@@ -63,8 +63,9 @@ def main() -> None:
 
     import torch
 
+    from charctl.checkpoints import checkpoint_file_name
     from charctl.errors import CharctlError
-    from charctl.runs import checkpoint_file_name, run_experiment
+    from charctl.runs import run_experiment
 
     experiment = run_experiment(a.run_dir)
     try:

@@ -162,8 +162,8 @@ def test_features_agree_between_clip_and_simulator():
 
 
 def test_smoke_training_and_resume(smoke_run_copy):
+    from charctl.checkpoints import load_checkpoint
     from charctl.commands.train import train_command
-    from charctl.runs import load_checkpoint
 
     run_dir = smoke_run_copy("cgail")  # `charctl train cgail scale=smoke`, once per session (test_smoke.py)
     state = load_checkpoint(run_dir / "checkpoints" / "last.pt", "cgail")
@@ -177,8 +177,8 @@ def test_smoke_training_and_resume(smoke_run_copy):
 
 
 def test_amp_baseline_smoke(tmp_path):
+    from charctl.checkpoints import load_checkpoint
     from charctl.commands.train import train_command
-    from charctl.runs import load_checkpoint
 
     (run_dir,) = train_command("cgail", ["scale=smoke", "cgail.conditional=false", f"output_root={tmp_path}"])
     state = load_checkpoint(run_dir / "checkpoints" / "last.pt", "cgail")
@@ -296,10 +296,10 @@ def test_kept_checkpoints_are_evaluated_by_name(smoke_run_copy):
     """Resuming the smoke run (512 samples, 128 per iteration) to 1024 with train.keep_checkpoint_every=256
     passes 640, 768, 896, 1024: the multiples of 256 crossed are 768 and 1024, so exactly those two are kept.
     `load_trained_run(RUN, name)` loads the named one, and a path or a missing name is a one-line error."""
+    from charctl.checkpoints import load_checkpoint
     from charctl.commands.train import train_command
     from charctl.errors import CharctlError
     from charctl.experiments.cgail.policy import load_trained_run
-    from charctl.runs import load_checkpoint
 
     run_dir = smoke_run_copy("cgail")
     train_command("cgail", ["train.total_samples=1024", "train.keep_checkpoint_every=256"], resume=run_dir)

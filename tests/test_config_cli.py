@@ -457,7 +457,7 @@ def _state(torch):
 
 
 def test_checkpoint_round_trip(tmp_path, torch_mod):
-    from charctl.runs import load_checkpoint, save_checkpoint
+    from charctl.checkpoints import load_checkpoint, save_checkpoint
 
     torch = torch_mod
     path = tmp_path / "ckpt" / "last.pt"
@@ -481,7 +481,7 @@ def test_checkpoint_round_trip(tmp_path, torch_mod):
 
 
 def test_checkpoint_wrong_experiment_or_signature(tmp_path, torch_mod):
-    from charctl.runs import load_checkpoint, save_checkpoint
+    from charctl.checkpoints import load_checkpoint, save_checkpoint
 
     path = save_checkpoint(tmp_path / "last.pt", "cgail", _state(torch_mod), {"obs_dim": 197, "hidden": [1024, 512]})
     with pytest.raises(CharctlError) as exc:
@@ -497,7 +497,7 @@ def test_checkpoint_wrong_experiment_or_signature(tmp_path, torch_mod):
 
 def test_checkpoint_needing_unsafe_pickle_is_refused(tmp_path, torch_mod):
     """weights_only loading: a checkpoint holding a numpy array (arbitrary pickled objects) is refused."""
-    from charctl.runs import load_checkpoint, save_checkpoint
+    from charctl.checkpoints import load_checkpoint, save_checkpoint
 
     path = save_checkpoint(tmp_path / "last.pt", "cgail", {"obs_mean": np.zeros(5)})
     with pytest.raises(CharctlError) as exc:
@@ -509,7 +509,7 @@ def test_checkpoint_needing_unsafe_pickle_is_refused(tmp_path, torch_mod):
 def test_not_a_checkpoint(tmp_path, torch_mod, kind):
     import zipfile
 
-    from charctl.runs import load_checkpoint, save_checkpoint
+    from charctl.checkpoints import load_checkpoint, save_checkpoint
 
     torch = torch_mod
     path = tmp_path / "last.pt"
@@ -534,7 +534,7 @@ def test_not_a_checkpoint(tmp_path, torch_mod, kind):
 
 
 def test_failed_save_keeps_the_previous_checkpoint(tmp_path, torch_mod, monkeypatch):
-    from charctl.runs import load_checkpoint, save_checkpoint
+    from charctl.checkpoints import load_checkpoint, save_checkpoint
 
     torch = torch_mod
     path = save_checkpoint(tmp_path / "last.pt", "cgail", {"iteration": 1})

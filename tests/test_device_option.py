@@ -161,7 +161,7 @@ def test_resume_continues_torch_cpu_random_stream(tmp_path):
 
 
 def test_gpu_checkpoint_resumes_on_a_cpu_only_machine(tmp_path, monkeypatch, capsys):
-    from charctl.runs import load_checkpoint, save_checkpoint
+    from charctl.checkpoints import load_checkpoint, save_checkpoint
 
     torch.manual_seed(0)
     straight = torch.cat(_train(tmp_path / "straight", 4).draws)
@@ -185,8 +185,8 @@ def test_gpu_checkpoint_resumes_on_a_cpu_only_machine(tmp_path, monkeypatch, cap
 
 
 def test_cuda_rng_states_round_trip_through_a_weights_only_checkpoint(tmp_path, monkeypatch):
+    from charctl.checkpoints import load_checkpoint, save_checkpoint
     from charctl.rl.runner import restore_rng_states, with_rng_states
-    from charctl.runs import load_checkpoint, save_checkpoint
 
     gpu_states = [torch.arange(16, dtype=torch.uint8), torch.arange(16, 32, dtype=torch.uint8)]
     monkeypatch.setattr(torch.cuda, "is_available", lambda: True)

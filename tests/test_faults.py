@@ -71,7 +71,7 @@ def temp_files(run_dir: Path) -> list[Path]:
 
 
 def load_state(run_dir: Path, experiment: str) -> dict:
-    from charctl.runs import load_checkpoint
+    from charctl.checkpoints import load_checkpoint
 
     return load_checkpoint(run_dir / "checkpoints" / "last.pt", experiment)
 
@@ -620,7 +620,7 @@ def test_mujoco_warnings_go_to_the_run_log_not_the_working_directory(tmp_path):
     warnings to <run>/mujoco.log and counts them."""
     code = (
         "import charctl, mujoco\n"
-        "from charctl.runs import capture_mujoco_log, count_mujoco_warnings\n"
+        "from charctl.mujoco_log import capture_mujoco_log, count_mujoco_warnings\n"
         f"capture_mujoco_log({str(tmp_path / 'run')!r})\n"
         "m = mujoco.MjModel.from_xml_string(\"<mujoco><worldbody><body><freejoint/><geom size='.1'/></body>"
         '</worldbody></mujoco>")\n'

@@ -320,8 +320,8 @@ def test_device_env_gives_the_cpu_env_observations(warp_sim_factory):
 def test_smoke_training_with_the_warp_backend_on_cpu(tmp_path):
     """`charctl train cgail scale=smoke env.backend=warp device=cpu` completes; its checkpoint has the CPU
     path's keys (plus the device env's generator state) and loads with the evaluation code."""
+    from charctl.checkpoints import load_checkpoint
     from charctl.experiments.cgail.policy import load_trained_run
-    from charctl.runs import load_checkpoint
 
     res = run_charctl(
         "train",

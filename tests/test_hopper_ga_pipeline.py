@@ -59,8 +59,8 @@ def test_same_seed_same_best_genome_local_and_process():
 def test_resume_from_a_checkpoint_continues_the_same_trajectory(tmp_path):
     """Stop after 2 generations, write the checkpoint (weights_only format), load it, continue to
     4: the same populations and curve as 4 generations in one go."""
+    from charctl.checkpoints import load_checkpoint, save_checkpoint
     from charctl.experiments.hopper_ga.ga import GAState
-    from charctl.runs import load_checkpoint, save_checkpoint
 
     cfg4 = small_cfg(**{"ga.generations": 4})
     s = settings_from_config(cfg4)

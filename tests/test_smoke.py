@@ -13,7 +13,8 @@ from charctl.experiments import EXPERIMENTS, load
 
 @pytest.mark.parametrize("name", list(EXPERIMENTS))
 def test_smoke_training_run(smoke_run, name):
-    from charctl.runs import load_checkpoint, open_run
+    from charctl.checkpoints import load_checkpoint
+    from charctl.runs import open_run
 
     run_dir = smoke_run(name)
     run = open_run(run_dir, load(name).config_class())  # the stored config is resolved and validates

@@ -12,7 +12,7 @@ def export_command(target: str, args: list[str], options: dict) -> None:
 
     check_options(options)  # numbers in range, every output writable: before any work or file
     if options.get("web"):  # a web demo's site folder: writable, not a file
-        from charctl.runs import check_writable_dir
+        from charctl.paths import check_writable_dir
 
         check_writable_dir(Path(options["web"]), "--web folder")
     if target in ("bvh", "video"):

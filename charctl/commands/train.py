@@ -94,7 +94,8 @@ def _train_on_ray(
 
 
 def _run(train_fn, run) -> None:
-    from charctl.runs import capture_mujoco_log, stop_signal
+    from charctl.mujoco_log import capture_mujoco_log
+    from charctl.signals import stop_signal
 
     capture_mujoco_log(run.dir)  # MuJoCo warnings go to <run>/mujoco.log, not ./MUJOCO_LOG.TXT
     try:
@@ -119,7 +120,7 @@ def _run(train_fn, run) -> None:
 
 
 def _report_mujoco_warnings(run) -> None:
-    from charctl.runs import MUJOCO_LOG, count_mujoco_warnings
+    from charctl.mujoco_log import MUJOCO_LOG, count_mujoco_warnings
 
     n = count_mujoco_warnings(run.dir)
     if n:

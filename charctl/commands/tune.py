@@ -82,7 +82,7 @@ def tune_command(experiment: str, overrides: list[str], opts: TuneOptions) -> Pa
     from charctl.experiments import load
     from charctl.launch.search_space import parse_overrides
     from charctl.launch.tune import TuneSetup, make_out_dir, run_tune
-    from charctl.runs import check_writable_dir
+    from charctl.paths import check_writable_dir
 
     check_experiment(experiment)
     exp = load(experiment)

@@ -44,7 +44,7 @@ def print_table(title: str, rows: dict, cols: list[str]) -> None:
 
 def write_json(path: Path, obj) -> None:
     """`obj` as indented JSON (numpy values converted), written atomically."""
-    from charctl.runs import _jsonable, atomic_write_text
+    from charctl.files import _jsonable, atomic_write_text
 
     atomic_write_text(path, json.dumps(_jsonable(obj), indent=2))
 

@@ -110,7 +110,7 @@ def prepare_jobs(experiment: str, jobs: list[list[str]], resources: Resources) -
     """Per job: its JobSpec (config validated, output_root made absolute) or its one-line error."""
     from charctl.config import compose_config
     from charctl.experiments import load
-    from charctl.runs import check_writable_dir
+    from charctl.paths import check_writable_dir
 
     schema = load(experiment).config_class()
     out: list[JobSpec | str] = []

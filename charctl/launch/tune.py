@@ -577,7 +577,7 @@ def _number(text: str) -> float | None:
 
 def make_out_dir(output_root: str | Path, experiment: str) -> Path:
     """`<output_root>/tune/<experiment>/<timestamp>/` (absolute; `_1`, `_2` ... when taken)."""
-    from charctl.runs import make_unique_dir
+    from charctl.paths import make_unique_dir
 
     root = Path(output_root).expanduser().resolve() / "tune" / experiment
     try:

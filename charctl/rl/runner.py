@@ -163,8 +163,9 @@ def crossed_multiple(samples: int, step: int, every: int) -> bool:
 
 def run_on_policy(learner: Learner, run, settings: RunnerSettings) -> dict:
     """Train `learner` until `settings.total_samples`, writing into `run` (charctl.runs.Run)."""
+    from charctl.checkpoints import kept_checkpoint_name
     from charctl.progress import TrainingProgress
-    from charctl.runs import StopFlag, kept_checkpoint_name
+    from charctl.signals import StopFlag
 
     if run.resumed:
         state = run.load_checkpoint(learner.signature())

@@ -198,7 +198,7 @@ def load_model(physics_hz: float = PHYSICS_HZ, friction: float = 1.0, armature: 
     """Compiled MjModel (cached per settings). Heavy import inside."""
     import mujoco
 
-    from charctl.runs import apply_mujoco_log
+    from charctl.mujoco_log import apply_mujoco_log
 
     apply_mujoco_log()  # warnings into the run's mujoco.log, never ./MUJOCO_LOG.TXT
     return mujoco.MjModel.from_xml_string(build_mjcf(physics_hz, friction, armature))

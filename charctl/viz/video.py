@@ -60,7 +60,7 @@ def write_video(frames: list[np.ndarray], path: str | Path, fps: float) -> Path:
     if not frames:
         raise CharctlError("no frames to write")
     tmp = path.with_name(path.stem + ".tmp" + path.suffix)
-    from charctl.runs import check_output_file
+    from charctl.paths import check_output_file
 
     check_output_file(path, "video")
     try:

@@ -2,7 +2,7 @@
 
 Python imports `sitecustomize` at start-up from sys.path, so a subprocess started with this folder on
 PYTHONPATH (`conftest.cli_env` adds it whenever a CHARCTL_FAULT_* variable is given) gets these faults;
-production code has no test hooks. They replace `charctl.runs._save_payload`, which serialises a
+production code has no test hooks. They replace `charctl.checkpoints._save_payload`, which serialises a
 checkpoint into its temp file:
 
   CHARCTL_FAULT_CHECKPOINT_DELAY=S   sleep S seconds in the middle of every checkpoint write (the temp
@@ -22,7 +22,7 @@ ENOSPC_ENV = "CHARCTL_FAULT_CHECKPOINT_ENOSPC"
 
 
 def _install() -> None:
-    import charctl.runs
+    import charctl.checkpoints
 
     written = [0]  # checkpoints written so far in this process
 
@@ -45,7 +45,7 @@ def _install() -> None:
         fh.write(data[half:])
         written[0] += 1
 
-    charctl.runs._save_payload = save_with_faults
+    charctl.checkpoints._save_payload = save_with_faults
 
 
 if os.environ.get(DELAY_ENV) or os.environ.get(ENOSPC_ENV):

@@ -23,6 +23,7 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
+from charctl.checkpoints import checkpoint_file_name
 from charctl.errors import CharctlError
 from charctl.eval.dtw import dtw_align
 from charctl.eval.pose import pose_error_matrix
@@ -34,7 +35,6 @@ from charctl.experiments.cgail.policy import (
     local_joint_rotations,
     resolve_run_dirs,
 )
-from charctl.runs import checkpoint_file_name
 
 EVAL_OVERRIDES = ("output_root", "device")  # the only key=value overrides `charctl eval cgail` takes
 

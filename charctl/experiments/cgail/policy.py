@@ -62,8 +62,9 @@ class TrainedRun:
 def load_trained_run(run_dir: str | Path, checkpoint: str | None = None) -> TrainedRun:
     """Rebuild the agent of a cgail run directory and load a checkpoint of RUN/checkpoints/ (weights_only):
     `checkpoint` (a file name, e.g. samples_020000000.pt from train.keep_checkpoint_every) or last.pt."""
+    from charctl.checkpoints import checkpoint_file_name
     from charctl.experiments.cgail.config import Config
-    from charctl.runs import checkpoint_file_name, open_run, run_experiment
+    from charctl.runs import open_run, run_experiment
 
     run_dir = Path(run_dir)
     exp = run_experiment(run_dir)

@@ -119,7 +119,7 @@ def train(cfg, run) -> dict:
 
     from charctl.guard import diverged, first_non_finite
     from charctl.progress import TrainingProgress
-    from charctl.runs import StopFlag
+    from charctl.signals import StopFlag
 
     torch.set_num_threads(int(cfg.train.torch_threads))
     torch.manual_seed(int(cfg.seed))

@@ -81,7 +81,7 @@ def write_outputs(out: Path, history: dict, genome: np.ndarray, s: Settings, cfg
     """best_genome.json, figures (fitness curve, COM path, limp, strip) and the numbers."""
     from charctl.experiments.hopper_ga import plots
     from charctl.experiments.hopper_ga.motion import run_motion
-    from charctl.runs import atomic_write_text
+    from charctl.files import atomic_write_text
 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -118,7 +118,7 @@ def load_best(run_dir: Path) -> tuple[np.ndarray, dict]:
         return np.array(list(doc["genes"].values()), dtype=float), doc
     ckpt = Path(run_dir) / "checkpoints" / "last.pt"
     if ckpt.is_file():
-        from charctl.runs import load_checkpoint
+        from charctl.checkpoints import load_checkpoint
 
         state = load_checkpoint(ckpt, "hopper-ga")
         return state["best_genome"].numpy().astype(float), {}

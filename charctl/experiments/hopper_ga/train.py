@@ -14,7 +14,7 @@ from charctl.experiments.hopper_ga.runtime import make_evaluator
 
 def train(cfg, run) -> dict:
     from charctl.progress import TrainingProgress
-    from charctl.runs import StopFlag
+    from charctl.signals import StopFlag
 
     s = settings_from_config(cfg)
     signature = {"genes": len(s.low), "population": int(cfg.ga.population)}

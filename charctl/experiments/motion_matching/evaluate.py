@@ -48,7 +48,7 @@ def output_dir(cfg, out: str | Path | None) -> Path:
         path = Path(out)
         path.mkdir(parents=True, exist_ok=True)
         from charctl.config import to_yaml
-        from charctl.runs import atomic_write_text
+        from charctl.files import atomic_write_text
 
         atomic_write_text(path / "config.yaml", to_yaml(cfg))
         return path

@@ -284,7 +284,7 @@ def plot_comparison(tables: Sequence[PushTable | None], labels: Sequence[str], p
 
 
 def save_tables(tables: dict[str, PushTable | None], path: str | Path) -> Path:
-    from charctl.runs import atomic_write_text
+    from charctl.files import atomic_write_text
 
     path = Path(path)
     atomic_write_text(
