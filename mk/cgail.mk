@@ -39,13 +39,14 @@ repro-cgail-10skill-kl: install ## cgail: the fifth ten-skill run, KL-targeting 
 # The fidelity recipe's 3-skill runs (docs/cgail.md, "Fidelity recipe"): A = per-skill style head, wrong-skill
 # fakes, class head on demonstrations only (w_S 0.8, w_C 0.2, r_C = P(command)), KL-targeting PPO rate; B = A's
 # run forked at its 5,005,312-sample checkpoint and continued with early termination on a low style reward to
-# 23,724,032 samples; C = B continued with early termination on a large pose error (0.5 m) to 4e7 samples.
+# 23,724,032 samples; C = B continued with early termination on a large pose error (0.5 m) to 4e7 samples;
+# D = C continued with a tracking reward against that reference (w_T 0.5) to 46,579,712 samples.
 CGAIL_FID := outputs/repro/cgail-fidelity
 CGAIL_FID_RECIPE := disc.style_head=per_skill disc.wrong_skill_fakes=0.25 cgail.class_on_policy=false reward.w_style=0.8 reward.w_class=0.2 reward.class_form=prob ppo.desired_kl=0.02 ppo.lr_max=1e-4 train.checkpoint_every=20 train.keep_checkpoint_every=2500000 seed=1
 CGAIL_FID_SAMPLES ?= 40000000
 
 .PHONY: repro-cgail-fidelity
-repro-cgail-fidelity: install ## cgail: the fidelity recipe's runs A, B and C (3 skills; ~5 h on 2 cores), fidelity of every kept checkpoint
+repro-cgail-fidelity: install ## cgail: the fidelity recipe's runs A, B, C and D (3 skills; ~5.5 h on 2 cores), fidelity of every kept checkpoint
 	$(CHARCTL) train cgail scale=small $(CGAIL_FID_RECIPE) train.total_samples=5005312 output_root=$(CGAIL_FID)/A
 	A=$$(ls -d $(CGAIL_FID)/A/cgail/*/ | tail -1); B=$(CGAIL_FID)/B/cgail/$$(basename $$A); \
 	mkdir -p $$B/checkpoints && cp $$A/config.yaml $$B/ && cp $$A/checkpoints/last.pt $$B/checkpoints/last.pt && \
@@ -53,7 +54,9 @@ repro-cgail-fidelity: install ## cgail: the fidelity recipe's runs A, B and C (3
 	$(CHARCTL) train cgail --resume $$B reward.low_style_threshold=0.05 reward.low_style_steps=10 train.fidelity_every=1000000 train.total_samples=23724032 && \
 	C=$(CGAIL_FID)/C/cgail/$$(basename $$A); mkdir -p $$C && cp -r $$B/config.yaml $$B/checkpoints $$B/tb $$C/ && \
 	$(CHARCTL) train cgail --resume $$C reward.pose_error_threshold=0.5 train.total_samples=$(CGAIL_FID_SAMPLES) && \
-	$(VENV)/bin/python scripts/eval_checkpoints.py $$B --rank fidelity && $(VENV)/bin/python scripts/eval_checkpoints.py $$C --rank fidelity
+	$(VENV)/bin/python scripts/eval_checkpoints.py $$B --rank fidelity && $(VENV)/bin/python scripts/eval_checkpoints.py $$C --rank fidelity && \
+	D=$(CGAIL_FID)/D/cgail/$$(basename $$A); mkdir -p $$D/checkpoints && cp -r $$C/config.yaml $$C/tb $$D/ && cp $$C/checkpoints/last.pt $$D/checkpoints/ && \
+	$(CHARCTL) train cgail --resume $$D reward.w_track=0.5 train.total_samples=46579712 && $(CHARCTL) eval $$D --fidelity --survival 5 -k 4
 
 .PHONY: repro-cgail-tracking-3skill
 repro-cgail-tracking-3skill: install ## cgail: the multi-skill tracking baseline (walk, run, right_kick; command and phase in the state), the fidelity anchor; not yet trained to the end here
