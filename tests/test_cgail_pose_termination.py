@@ -38,11 +38,11 @@ def test_reference_runs_on_from_the_rsi_frame_and_a_non_looping_clip_restarts_wi
     assert env.ref_frame.tolist() == [5, 5] and env.ref_active.all() and (env.ref_grace == 0).all()
     last = len(skills[1].obs) - 1
     env.ref_frame[:] = last - 1
-    env._advance_reference()
+    env._advance_phase(restart=True)
     assert env.ref_frame.tolist() == [last, last] and (env.ref_grace == 0).all()
-    env._advance_reference()  # past the last frame: back to the clip's start, unchecked for 3 steps
+    env._advance_phase(restart=True)  # past the last frame: back to the clip's start, unchecked for 3 steps
     assert env.ref_frame.tolist() == [0, 0] and env.ref_grace.tolist() == [3, 3]
-    env._advance_reference()
+    env._advance_phase(restart=True)
     assert env.ref_frame.tolist() == [1, 1] and env.ref_grace.tolist() == [2, 2]
 
 

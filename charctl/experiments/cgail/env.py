@@ -259,14 +259,20 @@ class CgailEnv:
             parts.append(self._phase_features(rows))
         return np.concatenate(parts, axis=1), disc_obs(k, f)
 
-    def _advance_phase(self) -> tuple[np.ndarray, np.ndarray]:
-        """Step every env's reference frame; returns (reference obs at the new frame, clip ended)."""
-        last = self.clip_frames[self.cmd] - 1
+    def _advance_phase(self, restart: bool = False) -> tuple[np.ndarray, np.ndarray]:
+        """Step every env's reference frame (a looping clip wraps); returns (reference obs (N, 133) at the new
+        frame, (N,) clip ended). A non-looping clip ends at its last frame (the tracking baseline truncates
+        there) or, with `restart` (the pose-error reference), starts again at frame 0 with grace steps."""
+        loops = self.clip_loops[self.cmd]
+        last = np.maximum(self.clip_frames[self.cmd] - 1, 1)
         nxt = self.ref_frame + 1
-        wrapped = np.where(self.clip_loops[self.cmd], nxt % np.maximum(last, 1), np.minimum(nxt, last))
-        ended = ~self.clip_loops[self.cmd] & (nxt >= last)
-        self.ref_frame = wrapped
-        return self._reference_obs(), ended
+        if restart:
+            again = ~loops & (nxt > last)
+            self.ref_frame = np.where(again, 0, np.where(loops, nxt % last, nxt))
+            self.ref_grace = np.where(again, self.pose_grace, np.maximum(self.ref_grace - 1, 0))
+            return self._reference_obs(), np.zeros(self.N, dtype=bool)
+        self.ref_frame = np.where(loops, nxt % last, np.minimum(nxt, last))
+        return self._reference_obs(), ~loops & (nxt >= last)
 
     def _reference_obs(self, frames: np.ndarray | None = None) -> np.ndarray:
         """(N, 133) the commanded clip's disc observation at every env's reference frame (or at `frames`)."""
@@ -277,17 +283,6 @@ class CgailEnv:
             ref[m] = self.skills[s].obs[frames[m]]
         return ref
 
-    def _advance_reference(self) -> np.ndarray:
-        """Pose-error termination: step every env's reference frame (a looping clip wraps, a non-looping one
-        restarts at frame 0 with grace steps after its last) and return the reference obs (N, 133) there."""
-        loops = self.clip_loops[self.cmd]
-        last = np.maximum(self.clip_frames[self.cmd] - 1, 1)
-        nxt = self.ref_frame + 1
-        restart = ~loops & (nxt > last)
-        self.ref_frame = np.where(restart, 0, np.where(loops, nxt % last, nxt))
-        self.ref_grace = np.where(restart, self.pose_grace, np.maximum(self.ref_grace - 1, 0))
-        return self._reference_obs()
-
     def _pose_error(self, obs: np.ndarray, ref: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """((N,) m, (N, 133)): `reference_pose_error` against the timed reference `ref` for non-looping clips,
         and against the clip's closest frame for looping ones (locomotion: a cadence of its own is no error);
@@ -297,8 +292,9 @@ class CgailEnv:
             m = np.flatnonzero(self.cmd == s)
             clip = self.skills[s].obs
             each = reference_pose_error(np.repeat(obs[m], len(clip), axis=0), np.tile(clip, (len(m), 1)))
-            best = each.reshape(len(m), len(clip)).argmin(axis=1)
-            err[m], ref[m] = each.reshape(len(m), len(clip))[np.arange(len(m)), best], clip[best]
+            each = each.reshape(len(m), len(clip))
+            best = each.argmin(axis=1)
+            err[m], ref[m] = each[np.arange(len(m)), best], clip[best]
         return err, ref
 
     def _restart_reference_after_ramp(self) -> None:
@@ -330,7 +326,7 @@ class CgailEnv:
         if self.tracking:  # the phase in the state is the new one
             ref, clip_ended = self._advance_phase()
         elif self.pose_threshold > 0:
-            ref = self._advance_reference()
+            ref, _ = self._advance_phase(restart=True)
         final_state, pair_next = self._features(k)
         if self.tracking:
             r_track = tracking_reward(pair_next, ref)
