@@ -79,6 +79,9 @@ def test_episodes_that_leave_the_reference_end_without_counting_a_fall(skills):
     strict.reset(np.arange(2))
     res = strict.step(np.zeros((2, 28)))
     assert res.pose_ended.all() and res.terminated.all() and strict.fall_count == 0
+    # ...but as a failure of the skill for fall-weighted commands: half-life 200 episodes, 2 failed episodes
+    a = 0.5 ** (2 / 200.0)
+    assert strict.fall_rate.tolist() == pytest.approx([0.5, a * 0.5 + (1 - a) * 1.0])
     loose = _env(skills, threshold=10.0, grace=0)
     loose.forced_command = np.array([1, 1])
     loose.reset(np.arange(2))

@@ -63,8 +63,9 @@ class EnvConfig:
     ramp_frames: int = 60  # eq 4.10-4.11: linear command ramp length (control frames); 0 = switch in one frame
     switch_prob: float = 0.01  # per control step, probability of re-sampling the command within an episode
     # Fall-weighted commands (prioritised sampling of hard motions, as ProtoMotions/PHC do): this share of
-    # the commands drawn at resets and switches is drawn in proportion to each skill's recent fall rate,
-    # the rest uniformly. 0 = uniform (the paper). docs/cgail.md, "Ten skills".
+    # the commands drawn at resets and switches is drawn in proportion to each skill's recent failure rate
+    # (episodes ended by a fall or, with reward.pose_error_threshold, by a large pose error), the rest
+    # uniformly. 0 = uniform (the paper). docs/cgail.md, "Ten skills".
     skill_fall_weight: float = 0.0
     skill_fall_halflife: float = 200.0  # episodes of a skill after which its fall-rate estimate has half forgotten
     action_scale: float = 1.0  # PD target (rad) = rest pose + action_scale * action

@@ -157,7 +157,7 @@ class CgailEnv:
         self.obs_dim = self.state_dim
         self.episode_return_goal = np.zeros(self.N)
         self.fall_count = 0
-        self.fall_rate = np.full(self.K, 0.5)  # per-skill recent fall rate (env.skill_fall_weight)
+        self.fall_rate = np.full(self.K, 0.5)  # per-skill recent failure rate: falls and pose-error ends (env.skill_fall_weight)
         self._state = np.zeros((self.N, self.state_dim))
         self._obs = np.zeros((self.N, DISC_OBS_DIM))
         self.reset(np.arange(self.N))
@@ -345,7 +345,9 @@ class CgailEnv:
         self.fall_count += int(fell.sum())
         done = np.flatnonzero(terminated | truncated)
         if done.size:
-            self.fall_rate = update_fall_rates(self.fall_rate, self.cmd[done], fell[done], self.cfg.skill_fall_halflife)
+            # a pose-error termination counts as a failure of the skill, like a fall (env.skill_fall_weight)
+            failed = (fell | pose_ended)[done]
+            self.fall_rate = update_fall_rates(self.fall_rate, self.cmd[done], failed, self.cfg.skill_fall_halflife)
         state, obs = final_state.copy(), pair_next.copy()
         self._state, self._obs = state, obs
         self._advance_ramp()
