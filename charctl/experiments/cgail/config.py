@@ -5,8 +5,9 @@ changes."""
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Annotated, Literal
 
-from charctl.config import BaseConfig
+from charctl.config import BaseConfig, check_fields, ranged
 from charctl.rl.config import PPOConfig, check_ppo
 from charctl.sim import CONTROL_HZ, JOINT_ARMATURE, PHYSICS_HZ
 
@@ -50,39 +51,45 @@ def paper_ppo() -> PPOConfig:
 
 @dataclass
 class EnvConfig:
-    num_envs: int = 64  # humanoids simulated together
-    physics_hz: float = PHYSICS_HZ  # MuJoCo step rate, charctl.sim.PHYSICS_HZ (DeepMimic uses 1200 Hz)
-    armature: float = JOINT_ARMATURE  # kg m^2 rotor inertia per hinge; >= 0.05 keeps physics_hz 150 stable
-    control_hz: float = CONTROL_HZ  # policy rate, charctl.sim.CONTROL_HZ (DeepMimic and the paper: 30 Hz)
-    episode_seconds: float = 10.0  # truncation length of an episode
+    num_envs: int = ranged(64, ge=1)  # humanoids simulated together
+    physics_hz: float = ranged(PHYSICS_HZ, gt=0)  # MuJoCo step rate, charctl.sim.PHYSICS_HZ (DeepMimic uses 1200 Hz)
+    # kg m^2 rotor inertia per hinge; >= 0.05 keeps physics_hz 150 stable
+    armature: float = ranged(JOINT_ARMATURE, gt=0)
+    control_hz: float = ranged(CONTROL_HZ, gt=0)  # policy rate, charctl.sim.CONTROL_HZ (DeepMimic and the paper: 30 Hz)
+    episode_seconds: float = ranged(10.0, gt=0)  # truncation length of an episode
     # Episode-length curriculum (DeepMimic's 0.5 s -> 20 s): training episodes are truncated at
     # curriculum_start_seconds at first, the limit growing linearly to episode_seconds over
     # curriculum_samples samples. 0 = off (every episode may last episode_seconds). docs/cgail.md, "Ablation".
     curriculum_start_seconds: float = 0.0
     curriculum_samples: int = 2_000_000  # samples over which the episode limit grows to episode_seconds
-    ramp_frames: int = 60  # eq 4.10-4.11: linear command ramp length (control frames); 0 = switch in one frame
-    switch_prob: float = 0.01  # per control step, probability of re-sampling the command within an episode
+    # eq 4.10-4.11: linear command ramp length (control frames); 0 = switch in one frame
+    ramp_frames: int = ranged(60, ge=0)
+    # per control step, probability of re-sampling the command within an episode
+    switch_prob: float = ranged(0.01, ge=0, le=1)
     # Fall-weighted commands (prioritised sampling of hard motions, as ProtoMotions/PHC do): this share of
     # the commands drawn at resets and switches is drawn in proportion to each skill's recent failure rate
     # (episodes ended by a fall or, with reward.pose_error_threshold, by a large pose error), the rest
     # uniformly. 0 = uniform (the paper). docs/cgail.md, "Ten skills".
     skill_fall_weight: float = 0.0
     skill_fall_halflife: float = 200.0  # episodes of a skill after which its fall-rate estimate has half forgotten
-    action_scale: float = 1.0  # PD target (rad) = rest pose + action_scale * action
-    fall_tolerance: float = 0.005  # m: a non-foot body this close to the ground ends the episode (a fall)
+    action_scale: float = ranged(1.0, gt=0)  # PD target (rad) = rest pose + action_scale * action
+    fall_tolerance: float = ranged(0.005, ge=0)  # m: a non-foot body this close to the ground ends the episode (a fall)
     goal_max_angle_deg: float = 45.0  # new heading goals lie within +- this angle of the current heading
-    goal_sharpness: float = 2.0  # r_G = exp(-sharpness * (v_target - d . v_xz)^2), v_target = the clip's mean speed
-    backend: str = "cpu"  # cpu (C MuJoCo, numpy) | warp (MuJoCo Warp on `device`, README "GPU") | auto (warp on CUDA)
+    # r_G = exp(-sharpness * (v_target - d . v_xz)^2), v_target = the clip's mean speed
+    goal_sharpness: float = ranged(2.0, gt=0)
+    # cpu (C MuJoCo, numpy) | warp (MuJoCo Warp on `device`, README "GPU") | auto (warp on CUDA)
+    backend: Annotated[str, Literal["cpu", "warp", "auto"]] = "cpu"
 
 
 @dataclass
 class RewardConfig:
-    w_style: float = 0.5  # w_S, eq 4.1
-    w_class: float = 0.5  # w_C, eq 4.1 (ignored when cgail.conditional=false)
-    w_goal: float = 0.0  # w_G, eq 4.1 (0 at small scale; the paper adds it for locomotion tasks)
+    w_style: float = ranged(0.5, ge=0)  # w_S, eq 4.1
+    w_class: float = ranged(0.5, ge=0)  # w_C, eq 4.1 (ignored when cgail.conditional=false)
+    w_goal: float = ranged(0.0, ge=0)  # w_G, eq 4.1 (0 at small scale; the paper adds it for locomotion tasks)
     # r_C: l1 (eq 4.8, zero until P(command) > 0.5) | prob (dense: P(command)) | logratio (log(K P(command)), >= -1)
-    class_form: str = "l1"
-    kind: str = "adversarial"  # adversarial (eq 4.1) | tracking (DeepMimic-style baseline: phase in the state)
+    class_form: Annotated[str, Literal["l1", "prob", "logratio"]] = "l1"
+    # adversarial (eq 4.1) | tracking (DeepMimic-style baseline: phase in the state)
+    kind: Annotated[str, Literal["adversarial", "tracking"]] = "adversarial"
     # Early termination on a low style reward (ProtoMotions AMP, against the stand-still optimum): an episode ends
     # when r_S of its pairs, scored for its command, stayed below this for low_style_steps control steps in a row.
     # 0 = off (the paper). CPU env only. charctl.experiments.cgail.termination; docs/cgail.md, "Fidelity recipe".
@@ -105,26 +112,28 @@ class RewardConfig:
 
 @dataclass
 class DiscConfig:
-    hidden: list[int] = field(default_factory=lambda: [1024, 512, 512])  # paper §5.3
-    lr: float = 1e-4  # Adam
-    w_gp: float = 0.5  # eq 4.6 gradient-penalty weight on data samples
-    w_class_loss: float = 1.0  # weight of L_class in eq 4.2
-    batch_size: int = 512  # data and policy pairs per discriminator step (each)
-    steps_per_iter: int = 10  # discriminator gradient steps per PPO iteration
-    replay_size: int = 100_000  # policy-pair replay buffer
-    replay_fraction: float = 0.5  # share of the policy half drawn from the replay buffer
-    objective: str = "lsgan"  # lsgan (eqs 4.4/4.7, the paper) | bce (-log(1 - sigmoid D) reward, AMP's GPU peers)
-    logit_reg: float = 0.0  # weight of sum(w^2) of the style head's weights (AMP: 0.01-0.05)
-    weight_decay: float = 0.0  # weight of sum(w^2) of every disc weight (AMP: 1e-4 - 5e-4)
-    class_lr: float = 0.0  # Adam lr of the class head; 0 = the same as `lr`
+    hidden: list[int] = ranged(factory=lambda: [1024, 512, 512], ge=1)  # paper §5.3
+    lr: float = ranged(1e-4, gt=0)  # Adam
+    w_gp: float = ranged(0.5, ge=0)  # eq 4.6 gradient-penalty weight on data samples
+    w_class_loss: float = ranged(1.0, ge=0)  # weight of L_class in eq 4.2
+    batch_size: int = ranged(512, ge=1)  # data and policy pairs per discriminator step (each)
+    steps_per_iter: int = ranged(10, ge=1)  # discriminator gradient steps per PPO iteration
+    replay_size: int = ranged(100_000, ge=1)  # policy-pair replay buffer
+    replay_fraction: float = ranged(0.5, ge=0, le=1)  # share of the policy half drawn from the replay buffer
+    # lsgan (eqs 4.4/4.7, the paper) | bce (-log(1 - sigmoid D) reward, AMP's GPU peers)
+    objective: Annotated[str, Literal["lsgan", "bce"]] = "lsgan"
+    logit_reg: float = ranged(0.0, ge=0)  # weight of sum(w^2) of the style head's weights (AMP: 0.01-0.05)
+    weight_decay: float = ranged(0.0, ge=0)  # weight of sum(w^2) of every disc weight (AMP: 1e-4 - 5e-4)
+    class_lr: float = ranged(0.0, ge=0)  # Adam lr of the class head; 0 = the same as `lr`
     # Learned temperature of the class logits (exp(s), s trained at class_lr): spectral norm caps how confident
     # the classifier can get; false = the paper's plain spectral-normalised head. docs/cgail.md, "Ten skills".
     learn_class_scale: bool = False
-    demo_oversample: int = 1  # demonstration pairs at clip times on a 1/(control_hz*k) grid; 1 = frames only
+    # demonstration pairs at clip times on a 1/(control_hz*k) grid; 1 = frames only
+    demo_oversample: int = ranged(1, ge=1)
     # Style head: shared (the paper: one score D for every skill) | per_skill (one style logit per skill from the
     # shared trunk, the command's own used for policy pairs and the clip's for data: C-ASE / CALM). Needs
     # cgail.conditional. docs/cgail.md, "Fidelity recipe".
-    style_head: str = "shared"
+    style_head: Annotated[str, Literal["shared", "per_skill"]] = "shared"
     # per_skill only: this share of the policy half of each discriminator batch is replaced by demonstration
     # pairs scored for a skill they do not belong to (fakes for that skill's logit; CALM's negatives). 0 = off.
     wrong_skill_fakes: float = 0.0
@@ -133,7 +142,7 @@ class DiscConfig:
 @dataclass
 class CgailSection:
     conditional: bool = True  # false = AMP baseline: no class head, no command input, style reward only
-    class_loss: str = "ce"  # ce (eq 4.5) | ls (least squares ablation, eq 6.2)
+    class_loss: Annotated[str, Literal["ce", "ls"]] = "ce"  # ce (eq 4.5) | ls (least squares ablation, eq 6.2)
     # The class head also trains on policy pairs labelled with their command (eq 4.5, the paper). false =
     # on demonstrations only, so r_C pays for looking like the commanded clip, not for the policy's own
     # per-command habits. docs/cgail.md, "Fidelity recipe".
@@ -142,14 +151,15 @@ class CgailSection:
 
 @dataclass
 class TrainConfig:
-    total_samples: int = 150_000_000  # environment steps over the whole run (paper: 1.5e8 samples)
-    rollout_steps: int = 32  # control steps per env per PPO iteration
-    checkpoint_every: int = 10  # iterations between checkpoints
+    total_samples: int = ranged(150_000_000, ge=1)  # environment steps over the whole run (paper: 1.5e8 samples)
+    rollout_steps: int = ranged(32, ge=1)  # control steps per env per PPO iteration
+    checkpoint_every: int = ranged(10, ge=1)  # iterations between checkpoints
     # samples between checkpoints also kept as checkpoints/samples_<n>.pt beside last.pt, so any of them can
     # be evaluated later (charctl eval RUN --checkpoint samples_<n>.pt); 0 = only last.pt
     keep_checkpoint_every: int = 0
-    log_every: int = 1  # iterations between TensorBoard / progress updates
-    torch_threads: int = 2  # torch intra-op threads of the updates (the rollout's policy forward uses one)
+    log_every: int = ranged(1, ge=1)  # iterations between TensorBoard / progress updates
+    # torch intra-op threads of the updates (the rollout's policy forward uses one)
+    torch_threads: int = ranged(2, ge=1)
     # Overlap each iteration's rollout with the previous rollout's PPO and discriminator updates, run in a
     # second thread (CPU env only; with env.backend=warp the loop runs in turn). The rollout then acts with
     # the policy of one update earlier, and PPO corrects for it with the decoupled objective (clip around
@@ -177,7 +187,11 @@ class Config(BaseConfig):
 
     @staticmethod
     def check(cfg) -> str | None:
-        """Cross-field checks; returns a message or None."""
+        """Cross-field checks; returns a message or None. validate has checked each field's declared
+        choices and range (charctl.config.check_fields) before; the choices are checked here again for
+        callers of check alone."""
+        if (msg := check_fields(cfg, Config, ranges=False)) is not None:  # declared choices (direct callers too)
+            return msg
         if not cfg.skills:
             return "skills must list at least one skill"
         names = [s.name for s in cfg.skills]
@@ -188,12 +202,6 @@ class Config(BaseConfig):
             return f"skill names must be unique, got {names}"
         if (msg := check_ppo(cfg.ppo)) is not None:
             return msg
-        if cfg.reward.kind not in ("adversarial", "tracking"):
-            return f"reward.kind must be 'adversarial' or 'tracking', got {cfg.reward.kind!r}"
-        if cfg.reward.class_form not in ("l1", "prob", "logratio"):
-            return f"reward.class_form must be 'l1', 'prob' or 'logratio', got {cfg.reward.class_form!r}"
-        if cfg.disc.objective not in ("lsgan", "bce"):
-            return f"disc.objective must be 'lsgan' or 'bce', got {cfg.disc.objective!r}"
         if not 0.0 <= cfg.reward.low_style_threshold < 1.0 or cfg.reward.low_style_steps < 1:
             return "reward.low_style_threshold must lie in [0, 1) and reward.low_style_steps be >= 1"
         if cfg.reward.low_style_threshold > 0 and (cfg.env.backend != "cpu" or cfg.reward.kind != "adversarial"):
@@ -210,16 +218,12 @@ class Config(BaseConfig):
                 "reward.kind=tracking over several skills needs env.switch_prob=0: the reference phase belongs to "
                 "the clip an episode started with (the multi-skill tracking baseline holds one command per episode)"
             )
-        if cfg.disc.style_head not in ("shared", "per_skill"):
-            return f"disc.style_head must be 'shared' or 'per_skill', got {cfg.disc.style_head!r}"
         if cfg.disc.style_head == "per_skill" and not cfg.cgail.conditional:
             return "disc.style_head=per_skill needs cgail.conditional=true (it scores pairs for their command)"
         if not 0.0 <= cfg.disc.wrong_skill_fakes < 1.0:
             return f"disc.wrong_skill_fakes must lie in [0, 1), got {cfg.disc.wrong_skill_fakes}"
         if cfg.disc.wrong_skill_fakes > 0 and cfg.disc.style_head != "per_skill":
             return "disc.wrong_skill_fakes needs disc.style_head=per_skill"
-        if cfg.cgail.class_loss not in ("ce", "ls"):
-            return f"cgail.class_loss must be 'ce' or 'ls', got {cfg.cgail.class_loss!r}"
         ratio = cfg.env.physics_hz / cfg.env.control_hz
         if abs(ratio - round(ratio)) > 1e-6:
             return f"env.physics_hz ({cfg.env.physics_hz}) must be a multiple of env.control_hz ({cfg.env.control_hz})"
@@ -242,8 +246,6 @@ class Config(BaseConfig):
             return "train.keep_checkpoint_every must be >= 0 samples (0 = keep only last.pt)"
         if cfg.env.ramp_frames < 0:
             return "env.ramp_frames must be >= 0"
-        if cfg.env.backend not in ("cpu", "warp", "auto"):
-            return f"env.backend must be 'cpu', 'warp' or 'auto', got {cfg.env.backend!r}"
         if cfg.env.backend == "warp":
             import importlib.util
 

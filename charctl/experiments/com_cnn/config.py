@@ -6,8 +6,9 @@ conf/preset/com-cnn/<scale>.yaml state what a scale changes (steps, batch, clips
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Annotated, Literal
 
-from charctl.config import BaseConfig
+from charctl.config import BaseConfig, check_fields, ranged
 
 # Table 1 of the paper: mass per body part (total 62). Units are the paper's (only ratios matter).
 PAPER_MASS_TABLE = {
@@ -89,17 +90,19 @@ class DataConfig:
     mirror: bool = True  # add the left/right mirrored copy of every DeepMimic clip (same split side)
     # held-out clips (never trained on; their mirrors are held out too)
     test_clips: list[str] = field(default_factory=lambda: ["walker/turn_right1", "crawl", "dance_b", "getup_faceup"])
-    fps: float = 30.0  # paper §3.2: every clip resampled to 30 fps
-    history: int = 90  # i, frames in M_t = {m_{t-i} .. m_{t-1}} (paper Table 4 best: 90)
-    frame: str = "root_t"  # reference frame of M_t, C_t and m_t: root_t = the root's heading frame at t (paper §3.2);
-    #                        root_prev = at t-1 (causal: needs nothing of frame t; our variant for generation)
-    loop_min_seconds: float = 6.0  # looping clips are repeated to at least this long (paper silent; ours)
-    loop_blend_frames: int = 6  # frames over which the pose jump at a loop seam is spread (ours)
-    bvh_scale: float = 1.0  # BVH positions x this = metres (0.01 for centimetre files)
+    fps: float = ranged(30.0, gt=0)  # paper §3.2: every clip resampled to 30 fps
+    history: int = ranged(90, ge=1)  # i, frames in M_t = {m_{t-i} .. m_{t-1}} (paper Table 4 best: 90)
+    # reference frame of M_t, C_t and m_t: root_t = the root's heading frame at t (paper §3.2); root_prev = at t-1
+    # (causal: needs nothing of frame t; our variant for generation)
+    frame: Annotated[str, Literal["root_t", "root_prev"]] = "root_t"
+    loop_min_seconds: float = ranged(6.0, ge=0)  # looping clips are repeated to at least this long (paper silent; ours)
+    loop_blend_frames: int = ranged(6, ge=0)  # frames over which the pose jump at a loop seam is spread (ours)
+    bvh_scale: float = ranged(1.0, ge=0)  # BVH positions x this = metres (0.01 for centimetre files)
     bvh_forward: list[float] = field(
         default_factory=lambda: [0.0, 0.0, 1.0]
     )  # root-local forward axis of BVH skeletons
-    window_cache_mb: int = 512  # precompute all training windows when they fit in this many MB (else per batch)
+    # precompute all training windows when they fit in this many MB (else per batch)
+    window_cache_mb: int = ranged(512, ge=0)
 
 
 @dataclass
@@ -113,28 +116,28 @@ class ComConfig:
 
 @dataclass
 class ModelConfig:
-    channels: list[int] = field(
-        default_factory=lambda: [32, 64, 128]
-    )  # filters per conv layer (paper Table 2); length = layers
-    kernel: int = 10  # temporal kernel width w (paper Table 2)
-    pool: int = 2  # max-pooling width after every conv+ReLU (Table 2's 81->40, 31->15, 6->3)
-    fc_hidden: int = 512  # width of the first FC layer of P (paper silent; ours)
-    fc_activation: str = "none"  # paper §3.3: P(K) = W1(W0 K + b0) + b1, no nonlinearity; "relu" is our variant
+    # filters per conv layer (paper Table 2); length = layers
+    channels: list[int] = ranged(factory=lambda: [32, 64, 128], ge=1)
+    kernel: int = ranged(10, ge=1)  # temporal kernel width w (paper Table 2)
+    pool: int = ranged(2, ge=1)  # max-pooling width after every conv+ReLU (Table 2's 81->40, 31->15, 6->3)
+    fc_hidden: int = ranged(512, ge=1)  # width of the first FC layer of P (paper silent; ours)
+    # paper §3.3: P(K) = W1(W0 K + b0) + b1, no nonlinearity; "relu" is our variant
+    fc_activation: Annotated[str, Literal["none", "relu"]] = "none"
     use_com: bool = True  # false = the history-only baseline (no C_t; the FC input is the 384-D Z alone)
 
 
 @dataclass
 class TrainConfig:
-    steps: int = 3000  # minibatch updates
-    batch_size: int = 64  # paper silent
-    optimizer: str = "sgd"  # paper §4: SGD | adam | adamw
-    lr: float = 0.01  # paper silent
-    momentum: float = 0.9  # SGD momentum (paper silent)
-    weight_decay: float = 0.0  # L2 weight decay of the optimiser (paper silent)
-    grad_clip: float = 10.0  # global gradient-norm clip (0 = off)
-    eval_every: int = 500  # steps between held-out losses in TensorBoard
-    checkpoint_every: int = 1000  # steps between checkpoints (and one at the end / on Ctrl-C)
-    torch_threads: int = 2  # torch intra-op threads
+    steps: int = ranged(3000, ge=1)  # minibatch updates
+    batch_size: int = ranged(64, ge=1)  # paper silent
+    optimizer: Annotated[str, Literal["sgd", "adam", "adamw"]] = "sgd"  # paper §4: SGD | adam | adamw
+    lr: float = ranged(0.01, gt=0)  # paper silent
+    momentum: float = ranged(0.9, ge=0)  # SGD momentum (paper silent)
+    weight_decay: float = ranged(0.0, ge=0)  # L2 weight decay of the optimiser (paper silent)
+    grad_clip: float = ranged(10.0, ge=0)  # global gradient-norm clip (0 = off)
+    eval_every: int = ranged(500, ge=1)  # steps between held-out losses in TensorBoard
+    checkpoint_every: int = ranged(1000, ge=1)  # steps between checkpoints (and one at the end / on Ctrl-C)
+    torch_threads: int = ranged(2, ge=1)  # torch intra-op threads
 
 
 @dataclass
@@ -147,24 +150,25 @@ class EvalConfig:
     paper_table5: dict[str, float] = field(
         default_factory=lambda: {"walk": 0.415, "crouch_walk": 0.614, "other": 1.567}
     )
-    horizon_s: float = 3.0  # autoregressive rollouts: longest horizon on the error curve
-    ar_stride: int = 10  # frames between rollout starts within a held-out clip
-    nn_pca_dims: int = 64  # nearest-neighbour baseline: history compressed to this many PCA dims (ours)
-    nn_com_weight: float = 1.0  # relative weight of C_t against the whole history in the NN distance
-    speed_frames: int = 300  # generation-speed measurement: frames generated at batch 1 on the CPU
+    horizon_s: float = ranged(3.0, gt=0)  # autoregressive rollouts: longest horizon on the error curve
+    ar_stride: int = ranged(10, ge=1)  # frames between rollout starts within a held-out clip
+    nn_pca_dims: int = ranged(64, ge=1)  # nearest-neighbour baseline: history compressed to this many PCA dims (ours)
+    nn_com_weight: float = ranged(1.0, ge=0)  # relative weight of C_t against the whole history in the NN distance
+    speed_frames: int = ranged(300, ge=1)  # generation-speed measurement: frames generated at batch 1 on the CPU
 
 
 @dataclass
 class GenerateConfig:
     seed_clip: str = "walker/walk_forward"  # clip whose first `history` frames seed the generation
     com_path: str = "circle:r=2,speed=1.2"  # default --com-path
-    seconds: float = 10.0  # default --seconds for procedural paths
+    seconds: float = ranged(10.0, gt=0)  # default --seconds for procedural paths
     com_clamp: bool = True  # paper §5 safety: the input COM moves at most max_com_step per frame, direction kept
-    max_com_step: float = 0.1  # m per frame (3 m/s at 30 fps; paper gives no number, ours)
-    crouch_drop: float = 0.3  # m the COM is lowered from --crouch-at on
-    crouch_ramp_s: float = 1.0  # s over which the drop is ramped in
-    heading_window: int = 10  # frame=root_t only: frames over which the COM's turning sets the root heading
-    min_com_speed: float = 0.2  # m/s below which the heading is held (frame=root_t only)
+    max_com_step: float = ranged(0.1, gt=0)  # m per frame (3 m/s at 30 fps; paper gives no number, ours)
+    crouch_drop: float = ranged(0.3, ge=0)  # m the COM is lowered from --crouch-at on
+    crouch_ramp_s: float = ranged(1.0, ge=0)  # s over which the drop is ramped in
+    # frame=root_t only: frames over which the COM's turning sets the root heading
+    heading_window: int = ranged(10, ge=1)
+    min_com_speed: float = ranged(0.2, ge=0)  # m/s below which the heading is held (frame=root_t only)
 
 
 @dataclass
@@ -180,12 +184,8 @@ class Config(BaseConfig):
     @staticmethod
     def check(cfg) -> str | None:
         """Cross-key checks; a string describes the first problem."""
-        if cfg.data.frame not in ("root_t", "root_prev"):
-            return f"data.frame must be root_t or root_prev, got {cfg.data.frame!r}"
-        if cfg.model.fc_activation not in ("none", "relu"):
-            return f"model.fc_activation must be none or relu, got {cfg.model.fc_activation!r}"
-        if cfg.train.optimizer not in ("sgd", "adam", "adamw"):
-            return f"train.optimizer must be sgd, adam or adamw, got {cfg.train.optimizer!r}"
+        if (msg := check_fields(cfg, Config, ranges=False)) is not None:  # declared choices (direct callers too)
+            return msg
         if cfg.data.history < 1 or not cfg.model.channels or cfg.model.kernel < 1 or cfg.model.pool < 1:
             return "data.history, model.kernel, model.pool must be >= 1 and model.channels non-empty"
         if conv_output_length(cfg.data.history, cfg.model.kernel, cfg.model.pool, len(cfg.model.channels)) < 1:

@@ -6,24 +6,25 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import Annotated, Literal
 
-from charctl.config import BaseConfig
+from charctl.config import BaseConfig, check_fields, ranged
 
 
 @dataclass
 class HopperConfig:
     """The planar spring hopper (eq 1-6)."""
 
-    h: float = 0.01  # s, frame step h of eq 2 and eq 10 (paper Fig 3.5/3.7: 0.01)
+    h: float = ranged(0.01, gt=0)  # s, frame step h of eq 2 and eq 10 (paper Fig 3.5/3.7: 0.01)
     g: float = -9.81  # m/s^2, gravity (negative, as in eq 2 and eq 4)
     touchdown_vy: float = 0.0  # m/s, HIP vertical speed at the first touchdown (eq 1 gives positions only)
     periodic: bool = False  # true: solve the touchdown speed of a steady (repeating) cycle; see docs
     periodic_tol: float = 0.001  # m/s, |landing - touchdown speed| accepted as periodic
-    periodic_scan: int = 9  # touchdown speeds scanned in [-max_touchdown_speed, 0] for a sign change
-    periodic_iterations: int = 12  # regula-falsi steps in the bracket; no convergence = invalid
+    periodic_scan: int = ranged(9, ge=1)  # touchdown speeds scanned in [-max_touchdown_speed, 0] for a sign change
+    periodic_iterations: int = ranged(12, ge=1)  # regula-falsi steps in the bracket; no convergence = invalid
     max_touchdown_speed: float = 6.0  # m/s, search range of the periodic touchdown speed
-    max_stance_s: float = 1.0  # s, a stance that has not lifted off by then is invalid
-    max_flight_s: float = 1.0  # s, a flight time T above this is invalid
+    max_stance_s: float = ranged(1.0, gt=0)  # s, a stance that has not lifted off by then is invalid
+    max_flight_s: float = ranged(1.0, gt=0)  # s, a flight time T above this is invalid
     thigh_fraction: float = 0.5  # |HIP-JOINT| / l; |JOINT-FOOT| = l - |HIP-JOINT| (paper Fig 3.3: knee mid-leg)
     knee_max_flexion_deg: float = 150.0  # knee flexion limit; a tighter fold (d too short) is invalid
     ground_tolerance: float = 0.005  # m, a foot lower than -tolerance is "leg through the ground" -> invalid
@@ -39,8 +40,8 @@ class SegmentConfig:
     direction: list[float] = field(
         default_factory=lambda: [0.0, 1.0, 0.0]
     )  # unit vector of the segment in the rest pose
-    length: float = 0.45  # m
-    mass: float = 0.355  # fraction of character.mass
+    length: float = ranged(0.45, gt=0)  # m
+    mass: float = ranged(0.355, gt=0)  # fraction of character.mass
     com: float = 0.5  # COM position along the segment, fraction of its length from the joint
     axes: str = "zx"  # balance DOFs of this joint: z = sagittal (eq 10-11 zd_b), x = lateral (xd_b)
 
@@ -62,7 +63,7 @@ class CharacterConfig:
     """The 11-joint character (paper Fig 2.1): root (pelvis), chest, neck, 2 x (shoulder, elbow),
     2 x (hip, knee). Leg segment lengths come from the gene l; everything else is fixed here."""
 
-    mass: float = 70.0  # kg, total body mass (eq 8 M_i = fraction * mass)
+    mass: float = ranged(70.0, gt=0)  # kg, total body mass (eq 8 M_i = fraction * mass)
     pelvis_mass: float = 0.142  # fraction; the pelvis mass point sits at HIP
     hip_half_width: float = 0.09  # m, each hip joint is this far from HIP along z (right = +z)
     thigh_mass: float = 0.100  # fraction, per leg
@@ -101,31 +102,31 @@ class BalanceConfig:
 class FitnessConfig:
     """eq 12-14."""
 
-    energy_scale: float = (
-        4.0e5  # E_r unit (kg m^2 s^-3 per m): the GA's lowest E_r at 2-10 m/s is ~0.15 of it; see docs
-    )
+    # E_r unit (kg m^2 s^-3 per m): the GA's lowest E_r at 2-10 m/s is ~0.15 of it; see docs
+    energy_scale: float = ranged(4.0e5, gt=0)
     predict_with_h: bool = True  # gamma's predicted speed is theta_dot_s + theta_ddot_s * h (paper omits h)
-    omega_floor: float = 0.1  # rad/s, softens max/min in gamma when a speed is near zero
+    omega_floor: float = ranged(0.1, gt=0)  # rad/s, softens max/min in gamma when a speed is near zero
 
 
 @dataclass
 class GAConfig:
-    population: int = 100  # paper Fig 5.7: 100 individuals
-    generations: int = 100  # paper Fig 5.7: 100 generations
-    tournament: int = 2  # DEAP selTournament size
+    population: int = ranged(100, ge=1)  # paper Fig 5.7: 100 individuals
+    generations: int = ranged(100, ge=1)  # paper Fig 5.7: 100 generations
+    tournament: int = ranged(2, ge=1)  # DEAP selTournament size
     elite: int = 2  # best individuals copied unchanged into the next generation
-    cxpb: float = 0.7  # crossover probability per pair (DEAP cxSimulatedBinaryBounded)
-    mutpb: float = 0.5  # mutation probability per individual (DEAP mutPolynomialBounded)
+    cxpb: float = ranged(0.7, ge=0, le=1)  # crossover probability per pair (DEAP cxSimulatedBinaryBounded)
+    mutpb: float = ranged(0.5, ge=0, le=1)  # mutation probability per individual (DEAP mutPolynomialBounded)
     cx_eta: float = 15.0  # SBX crowding degree
     mut_eta: float = 10.0  # polynomial mutation crowding degree
-    indpb: float = 0.2  # per-gene mutation probability
-    init_retries: int = 50  # generation 0: re-draw invalid individuals up to this many rounds
+    indpb: float = ranged(0.2, ge=0, le=1)  # per-gene mutation probability
+    init_retries: int = ranged(50, ge=1)  # generation 0: re-draw invalid individuals up to this many rounds
 
 
 @dataclass
 class RuntimeConfig:
-    kind: str = "local"  # local (vectorised numpy) | process (multiprocessing pool) | ray
-    workers: int = 2  # process/ray: parallel workers (the population is split into this many chunks)
+    # local (vectorised numpy) | process (multiprocessing pool) | ray
+    kind: Annotated[str, Literal["local", "process", "ray"]] = "local"
+    workers: int = ranged(2, ge=1)  # process/ray: parallel workers (the population is split into this many chunks)
     address: str = ""  # ray: cluster address ("" = start Ray on this machine)
 
 
@@ -137,16 +138,17 @@ class LimpConfig:
 
 @dataclass
 class ExportConfig:
-    fps: float = 60.0  # BVH frame rate
-    video_fps: float = 30.0  # mp4 frame rate
-    seconds: float = 3.0  # length of the exported running motion (rounded up to whole cycles)
+    fps: float = ranged(60.0, gt=0)  # BVH frame rate
+    video_fps: float = ranged(30.0, gt=0)  # mp4 frame rate
+    seconds: float = ranged(3.0, gt=0)  # length of the exported running motion (rounded up to whole cycles)
 
 
 @dataclass
 class Config(BaseConfig):
     DEVICES = ("cpu",)  # numpy only: device=cuda is refused (charctl.config.check_device_name), auto = cpu
     experiment: str = "hopper-ga"
-    speed: float = 5.0  # m/s, target running speed = HIP speed x_dot of eq 2-3 (conceptual control parameter)
+    # m/s, target running speed = HIP speed x_dot of eq 2-3 (conceptual control parameter)
+    speed: float = ranged(5.0, gt=0)
     beta: float = 0.0  # briskness, eq 14, 0 <= beta < 1
     hopper: HopperConfig = field(default_factory=HopperConfig)
     character: CharacterConfig = field(default_factory=CharacterConfig)
@@ -161,6 +163,8 @@ class Config(BaseConfig):
     @staticmethod
     def check(cfg) -> str | None:
         """Cross-field checks; returns a message or None."""
+        if (msg := check_fields(cfg, Config, ranges=False)) is not None:  # declared choices (direct callers too)
+            return msg
         if not 0.0 <= cfg.beta < 1.0:
             return f"beta must satisfy 0 <= beta < 1 (eq 14), got {cfg.beta}"
         if cfg.speed <= 0:
@@ -199,8 +203,6 @@ class Config(BaseConfig):
             return "ga.elite must lie in [1, population) (elitism keeps the best individual)"
         if cfg.ga.tournament < 1:
             return "ga.tournament must be >= 1"
-        if cfg.runtime.kind not in ("local", "process", "ray"):
-            return f"runtime.kind must be local, process or ray, got {cfg.runtime.kind!r}"
         if cfg.runtime.workers < 1:
             return "runtime.workers must be >= 1"
         if cfg.fitness.energy_scale <= 0 or cfg.fitness.omega_floor <= 0:

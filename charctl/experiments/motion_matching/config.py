@@ -8,8 +8,9 @@ round(n * data.fps / frame_unit_hz), so changing `data.fps` keeps every horizon 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Annotated, Literal
 
-from charctl.config import BaseConfig
+from charctl.config import BaseConfig, check_fields, ranged
 from charctl.errors import CharctlError
 
 NAME = "motion-matching"
@@ -31,19 +32,20 @@ class DataConfig:
 
     clips: list[str] = field(default_factory=lambda: list(DEFAULT_CLIPS))  # charctl clip names (humanoid)
     mirror: bool = True  # add every clip's left/right mirror (":mirror")
-    fps: float = 120.0  # database rate; the paper's data is 120 Hz
+    fps: float = ranged(120.0, gt=0)  # database rate; the paper's data is 120 Hz
     # Looping clips (all shipped locomotion clips are 1.2 s loops) are unrolled: `loop_cycles_before`
     # cycles before and `loop_cycles_after` after the searchable cycle, so every searchable frame has
     # its past/future trajectory and playback can run on. Only one cycle per clip is searchable
     # (the others are exact repeats). Paper: silent (its data is one long take).
-    loop_cycles_before: int = 1
-    loop_cycles_after: int = 4  # unrolled cycles after the searchable one (see loop_cycles_before)
+    loop_cycles_before: int = ranged(1, ge=0)
+    loop_cycles_after: int = ranged(4, ge=1)  # unrolled cycles after the searchable one (see loop_cycles_before)
     # DeepMimic loops do not close exactly (seam jumps up to ~50 deg in the neck of turn_right0): the
     # seam residual of every joint is spread linearly over the cycle before unrolling.
     close_loops: bool = True
     bvh_dir: str = ""  # a folder of .bvh files (any skeleton, y-up) replaces `clips` when set
-    bvh_scale: float = 0.0  # file units -> metres; 0 = auto (0.01 when the root is higher than 5 units)
-    bvh_forward: str = "auto"  # root-local forward axis: auto | +x | -x | +z | -z
+    bvh_scale: float = ranged(0.0, ge=0)  # file units -> metres; 0 = auto (0.01 when the root is higher than 5 units)
+    # root-local forward axis: auto | +x | -x | +z | -z
+    bvh_forward: Annotated[str, Literal["auto", "+x", "-x", "+z", "-z"]] = "auto"
     bvh_end_joints: list[str] = field(default_factory=list)  # pose end points; empty = two lowest leaves (feet)
     bvh_mirror: bool = False  # user BVH clips are not mirrored (left/right names are skeleton specific)
 
@@ -53,35 +55,38 @@ class FeatureConfig:
     """The feature vector (paper §3 and Fig. 7). Defaults = the paper's best setting (Table 1):
     4 future samples every 25 frames, position + velocity 0.8:0.2, discount 0.7."""
 
-    future_samples: int = 4  # Table 1 cases 1-7: 1..7 samples every 20 frames; cases 8-9: 4x25, 3x33
-    future_spacing: int = 25  # paper frames between future samples
-    past_samples: int = 0  # Table 1 cases 10-11 add the past trajectory (always worse in the paper)
-    past_spacing: int = 25  # paper frames between past samples
+    future_samples: int = ranged(4, ge=1)  # Table 1 cases 1-7: 1..7 samples every 20 frames; cases 8-9: 4x25, 3x33
+    future_spacing: int = ranged(25, ge=1)  # paper frames between future samples
+    past_samples: int = ranged(0, ge=0)  # Table 1 cases 10-11 add the past trajectory (always worse in the paper)
+    past_spacing: int = ranged(25, ge=1)  # paper frames between past samples
     position_weight: float = 0.8  # position : velocity weights, Table 1 cases 12-15 (best 0.8:0.2)
     velocity_weight: float = 0.2  # 0 removes the future-velocity block
     direction_weight: float = 0.0  # future facing directions (Clavet/Holden); not in the paper -> 0
     past_weight: float = 1.0  # weight of the past-position block when past_samples > 0
-    discount: float = 0.7  # gamma: the i-th future sample's weight is gamma^(i-1) (cases 16-19, best 0.7)
+    # gamma: the i-th future sample's weight is gamma^(i-1) (cases 16-19, best 0.7)
+    discount: float = ranged(0.7, gt=0, le=1)
     pose_weight: float = 1.0  # weight of each pose block (root height, tilt, end points) vs trajectory
     end_points: list[str] = field(default_factory=lambda: ["right_ankle", "left_ankle"])  # humanoid bodies
     end_velocities: bool = True  # include end-point velocities (Clavet's foot velocities)
     # Heading of the root-local frame: the root's own yaw (paper) or its centred moving average over
     # this many seconds (a "simulation bone"); 0 = paper.
-    heading_smoothing: float = 0.0
+    heading_smoothing: float = ranged(0.0, ge=0)
 
 
 @dataclass
 class RuntimeConfig:
     """Online generation (paper §3)."""
 
-    search_interval: int = 20  # paper frames between searches (paper: 20 = ~0.15 s)
-    exclude_window: int = 20  # k: frames i of the current clip with |phase(i) - phase(cur)| < k are skipped
+    search_interval: int = ranged(20, ge=1)  # paper frames between searches (paper: 20 = ~0.15 s)
+    # k: frames i of the current clip with |phase(i) - phase(cur)| < k are skipped
+    exclude_window: int = ranged(20, ge=0)
     # Paper: the k frames around the current one are never chosen, so every search jumps.
     # true = Holden's variant: the current frame is a candidate too (continue if it is best).
     continue_if_best: bool = False
-    end_buffer: int = 20  # paper frames at the end of a non-looping clip that are never searched
-    index: str = "bbox"  # bbox (Holden's bounding boxes, numba) | kdtree (scipy cKDTree) | brute (reference)
-    halflife: float = 0.1  # s, inertialization: critically damped decay of the pose offset
+    end_buffer: int = ranged(20, ge=0)  # paper frames at the end of a non-looping clip that are never searched
+    # bbox (Holden's bounding boxes, numba) | kdtree (scipy cKDTree) | brute (reference)
+    index: Annotated[str, Literal["bbox", "kdtree", "brute"]] = "bbox"
+    halflife: float = ranged(0.1, gt=0)  # s, inertialization: critically damped decay of the pose offset
     inertialize_root: bool = False  # also blend root velocity / turn rate (paper: raw root deltas)
 
 
@@ -89,16 +94,17 @@ class RuntimeConfig:
 class PathConfig:
     """Target paths (paper Fig. 5): circle, square (straights + 90 deg turns), star (sharp turns)."""
 
-    speed: float = 0.9  # m/s of the target point; the database walks at 0.8-1.0 m/s (run: 3.6), 1.0 lags on curves
-    circle_radius: float = 3.0  # m
-    square_side: float = 5.0  # m
+    # m/s of the target point; the database walks at 0.8-1.0 m/s (run: 3.6), 1.0 lags on curves
+    speed: float = ranged(0.9, gt=0)
+    circle_radius: float = ranged(3.0, gt=0)  # m
+    square_side: float = ranged(5.0, gt=0)  # m
     star_points: int = 5  # tips of the star path
-    star_outer: float = 3.0  # m, tip radius
-    star_inner: float = 1.5  # m, radius of the inner corners
-    laps: float = 1.0  # how far the target travels: laps of a closed path (open CSV paths: to the end)
+    star_outer: float = ranged(3.0, gt=0)  # m, tip radius
+    star_inner: float = ranged(1.5, gt=0)  # m, radius of the inner corners
+    laps: float = ranged(1.0, gt=0)  # how far the target travels: laps of a closed path (open CSV paths: to the end)
     # Controller: desired future positions = target point at t + dt_i, plus the current offset of the
     # character from the target decayed with this half-life (s). 0 = raw target points.
-    correction_halflife: float = 0.0
+    correction_halflife: float = ranged(0.0, ge=0)
 
 
 @dataclass
@@ -110,7 +116,7 @@ class SweepConfig:
     # Rollouts per path, started at evenly spaced gait phases of the best-matching clip; errors are
     # pooled over their frames. One rollout is chaotic (a 2% change of speed moves a case's mean
     # error by ~0.05 m), so several starts make the ranking of cases meaningful. Paper: silent.
-    starts: int = 4
+    starts: int = ranged(4, ge=1)
     plots: bool = True  # PNG of generated vs target paths per case
 
 
@@ -120,7 +126,7 @@ class Config(BaseConfig):
     experiment: str = "motion-matching"
     path: str = "star"  # circle | square | star | FILE.csv (x,z waypoints, metres)
     case: str = ""  # "" = use features.*; "1".."19" = a Table 1 case; "best" = best case of the latest sweep
-    frame_unit_hz: float = 120.0  # rate of the frame counts in features.*/runtime.* (paper data: 120 Hz)
+    frame_unit_hz: float = ranged(120.0, gt=0)  # rate of the frame counts in features.*/runtime.* (paper data: 120 Hz)
     data: DataConfig = field(default_factory=DataConfig)
     features: FeatureConfig = field(default_factory=FeatureConfig)
     runtime: RuntimeConfig = field(default_factory=RuntimeConfig)
@@ -130,6 +136,8 @@ class Config(BaseConfig):
     @staticmethod
     def check(cfg) -> str | None:
         """A one-line problem with the config, or None."""
+        if (msg := check_fields(cfg, Config, ranges=False)) is not None:  # declared choices (direct callers too)
+            return msg
         f, r, d, p = cfg.features, cfg.runtime, cfg.data, cfg.paths
         if f.future_samples < 1 or f.future_spacing < 1:
             return "features.future_samples and features.future_spacing must be >= 1"
@@ -143,8 +151,6 @@ class Config(BaseConfig):
             return f"features.discount must be in (0, 1], got {f.discount}"
         if r.search_interval < 1 or r.exclude_window < 0 or r.end_buffer < 0:
             return "runtime.search_interval must be >= 1, exclude_window and end_buffer >= 0"
-        if r.index not in ("kdtree", "bbox", "brute"):
-            return f"runtime.index must be kdtree, bbox or brute, got {r.index!r}"
         if r.halflife <= 0:
             return "runtime.halflife must be > 0 (seconds)"
         if d.fps <= 0 or cfg.frame_unit_hz <= 0:
@@ -159,8 +165,6 @@ class Config(BaseConfig):
             return "sweep.starts must be >= 1"
         if p.star_points < 3:
             return "paths.star_points must be >= 3"
-        if d.bvh_forward not in ("auto", "+x", "-x", "+z", "-z"):
-            return f"data.bvh_forward must be auto, +x, -x, +z or -z, got {d.bvh_forward!r}"
         return None
 
 
