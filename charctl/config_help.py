@@ -1,10 +1,12 @@
-"""`charctl config EXPERIMENT --explain KEY`: each knob's help, type, schema default, resolved value and
-the config layer that set it.
+"""`charctl config EXPERIMENT --explain KEY`: each knob's help, type, declared choices or range, schema
+default, resolved value and the config layer that set it.
 
 The help of a knob is the comment written beside its field in the experiment's schema (and the comment
 lines right above it), so it is stated once, where the default is; this module reads it back from the
 dataclass source. The layer is the last of conf/config.yaml -> experiment -> scale -> preset -> command
-line that names the key (charctl.config's composition order), or the schema when none does.
+line that names the key (charctl.config's composition order), or the schema when none does. The
+choices and the range are the field's own declarations (`Annotated[str, Literal[...]]`, `ranged(...)`),
+the ones charctl.config.check_fields enforces.
 """
 
 from __future__ import annotations
@@ -28,6 +30,19 @@ class Knob:
     type: str
     default: object
     help: str
+    choices: tuple | None = None  # a string-choice field's allowed values
+    range: dict | None = None  # a numeric field's declared bounds, e.g. {"ge": 0, "lt": 1}
+    each: bool = False  # the range bounds every element (a list field)
+
+    def allowed(self) -> str:
+        """'one of a, b' or '>= 0 and < 1' (list fields: 'each >= 1'); '' when nothing is declared."""
+        from charctl.config import range_text
+
+        if self.choices:
+            return "one of " + ", ".join(str(c) for c in self.choices)
+        if self.range:
+            return ("each " if self.each else "") + range_text(self.range)
+        return ""
 
 
 def _comments(cls: type) -> dict[str, str]:
@@ -66,7 +81,10 @@ def _default(f: dataclasses.Field) -> object:
 
 def knobs(schema: type, prefix: str = "") -> list[Knob]:
     """Every leaf field of `schema` (nested dataclasses walked), in declaration order."""
+    from charctl.config import field_range, schema_choices
+
     hints = typing.get_type_hints(schema)
+    choices = schema_choices(schema)
     docs = {}
     for cls in reversed(schema.__mro__):  # a base class's comments, then the subclass's
         if dataclasses.is_dataclass(cls):
@@ -78,7 +96,17 @@ def knobs(schema: type, prefix: str = "") -> list[Knob]:
             out += knobs(hint, f"{prefix}{f.name}.")
             continue
         name = getattr(hint, "__name__", None) if isinstance(hint, type) else None
-        out.append(Knob(prefix + f.name, name or str(hint).replace("typing.", ""), _default(f), docs.get(f.name, "")))
+        out.append(
+            Knob(
+                prefix + f.name,
+                name or str(hint).replace("typing.", ""),
+                _default(f),
+                docs.get(f.name, ""),
+                choices=choices.get(f.name),
+                range=field_range(f),
+                each=typing.get_origin(hint) is list,
+            )
+        )
     return out
 
 
@@ -130,6 +158,8 @@ def explain(experiment: str, key: str, overrides: list[str], schema: type) -> st
         value = OmegaConf.to_container(value) if OmegaConf.is_config(value) else value
         src = source_of(k.key, experiment, str(cfg.scale), overrides)
         lines = [f"{k.key}: {value!r}  ({k.type}; schema default {k.default!r}; set by {src})"]
+        if k.allowed():
+            lines.append(f"    allowed: {k.allowed()}")
         if k.help:
             lines.append(f"    {k.help}")
         blocks.append("\n".join(lines))

@@ -49,3 +49,16 @@ def test_cli_explain():
     assert ok.stdout.startswith("env.num_envs: ") and "set by conf/preset/cgail/smoke.yaml" in ok.stdout
     bad = run_charctl("config", "cgail", "--explain", "nope")
     assert bad.returncode == 2 and bad.stderr.strip().startswith("error: no config key 'nope'")
+
+
+def test_explain_prints_the_declared_choices_and_range():
+    schema = load("cgail").config_class()
+    ks = {k.key: k for k in knobs(schema)}
+    assert ks["reward.kind"].choices == ("adversarial", "tracking") and ks["reward.kind"].type == "str"
+    assert ks["ppo.gamma"].allowed() == ">= 0 and < 1" and ks["ppo.hidden"].allowed() == "each >= 1"
+    assert ks["reward.w_track"].allowed() == ""  # nothing declared: no line
+    text = explain("cgail", "reward", [], schema)
+    assert "reward.kind: 'adversarial'  (str; schema default 'adversarial'; set by schema default)\n" in text
+    assert "\n    allowed: one of adversarial, tracking\n" in text
+    assert "reward.w_style: 0.5  (float; schema default 0.5; set by schema default)\n    allowed: >= 0\n" in text
+    assert "reward.w_track: 0.0  (float; schema default 0.0; set by schema default)\n    Weight w_T" in text
