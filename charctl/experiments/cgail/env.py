@@ -157,7 +157,8 @@ class CgailEnv:
         self.obs_dim = self.state_dim
         self.episode_return_goal = np.zeros(self.N)
         self.fall_count = 0
-        self.fall_rate = np.full(self.K, 0.5)  # per-skill recent failure rate: falls and pose-error ends (env.skill_fall_weight)
+        # per-skill recent failure rate: falls and pose-error ends (env.skill_fall_weight)
+        self.fall_rate = np.full(self.K, 0.5)
         self._state = np.zeros((self.N, self.state_dim))
         self._obs = np.zeros((self.N, DISC_OBS_DIM))
         self.reset(np.arange(self.N))
