@@ -45,14 +45,12 @@ def main() -> None:
         compare_with_revision(a.against, a.envs, a.iters, a.rounds, a.overrides)
         return
     from charctl.config import compose_config
+    from charctl.experiments.cgail.agent import build_agent
     from charctl.experiments.cgail.config import Config
     from charctl.experiments.cgail.env import CgailEnv
-    from charctl.experiments.cgail.train import (
-        CgailLearner,
-        build_agent,
-        collect_rollout,
-        discriminator_rewards,
-    )
+    from charctl.experiments.cgail.reward import discriminator_rewards
+    from charctl.experiments.cgail.rollout import collect_rollout
+    from charctl.experiments.cgail.train import CgailLearner
 
     cfg = compose_config("cgail", [*a.overrides, f"env.num_envs={a.envs}"], Config)
     torch.set_num_threads(int(cfg.train.torch_threads))

@@ -33,7 +33,9 @@ def bench_one(num_envs: int, iters: int, device: str, overrides: list[str], step
     """Figures of one env count (a fresh learner, warmed up by one iteration before timing)."""
     from charctl.config import compose_config
     from charctl.experiments.cgail.config import Config
-    from charctl.experiments.cgail.train import CgailLearner, collect_rollout, discriminator_rewards
+    from charctl.experiments.cgail.reward import discriminator_rewards
+    from charctl.experiments.cgail.rollout import collect_rollout
+    from charctl.experiments.cgail.train import CgailLearner
 
     extra = [f"env.num_envs={num_envs}", "env.backend=warp", f"device={device}"]
     if steps is not None:

@@ -77,7 +77,7 @@ def test_spectral_norm_on_every_discriminator_layer():
 def test_learned_class_scale_multiplies_logits_and_grows_when_right():
     from types import SimpleNamespace
 
-    from charctl.experiments.cgail.train import discriminator_param_groups
+    from charctl.experiments.cgail.agent import discriminator_param_groups
 
     torch.manual_seed(0)
     plain = Discriminator(4, 2, [8])

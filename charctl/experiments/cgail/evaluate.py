@@ -35,6 +35,7 @@ from charctl.experiments.cgail.policy import (
     local_joint_rotations,
     resolve_run_dirs,
 )
+from charctl.experiments.cgail.skills import DemoPairs
 
 EVAL_OVERRIDES = ("output_root", "device")  # the only key=value overrides `charctl eval cgail` takes
 
@@ -277,7 +278,7 @@ def eval_confusion(tr: DeviceRun, episodes: int, out: Path, seed: int = 99) -> d
         policy[k] = ro.probs.mean(0)
     data = np.zeros((K, K))
     with torch.no_grad():
-        for k, p in enumerate(tr.agent.demos.pairs):
+        for k, p in enumerate(DemoPairs(tr.agent.skills).pairs):  # the demonstration pairs of each clip
             _, logits = tr.discriminate_for(p, k)
             data[k] = F.softmax(logits, -1).mean(0).cpu().numpy()
     result = {

@@ -9,8 +9,8 @@ import numpy as np
 import torch
 
 from charctl.errors import CharctlError
+from charctl.experiments.cgail.agent import Agent, build_agent, load_policy_state
 from charctl.experiments.cgail.env import CgailEnv
-from charctl.experiments.cgail.train import Agent, build_agent, load_agent_state
 from charctl.motion import rotations as R
 
 
@@ -61,7 +61,9 @@ class TrainedRun:
 
 def load_trained_run(run_dir: str | Path, checkpoint: str | None = None) -> TrainedRun:
     """Rebuild the agent of a cgail run directory and load a checkpoint of RUN/checkpoints/ (weights_only):
-    `checkpoint` (a file name, e.g. samples_020000000.pt from train.keep_checkpoint_every) or last.pt."""
+    `checkpoint` (a file name, e.g. samples_020000000.pt from train.keep_checkpoint_every) or last.pt.
+    Only what inference needs is built and loaded: the policy, the discriminator and the skills (no
+    optimisers, demonstration pairs or replay buffer)."""
     from charctl.checkpoints import checkpoint_file_name
     from charctl.experiments.cgail.config import Config
     from charctl.runs import open_run, run_experiment
@@ -72,8 +74,8 @@ def load_trained_run(run_dir: str | Path, checkpoint: str | None = None) -> Trai
         raise CharctlError(f"{run_dir} is a {exp!r} run, not a cgail run")
     run = open_run(run_dir, Config)
     torch.set_num_threads(max(1, int(run.cfg.train.torch_threads)))
-    agent = build_agent(run.cfg)
-    load_agent_state(agent, run.load_checkpoint(agent.signature(), name=checkpoint_file_name(checkpoint)))
+    agent = build_agent(run.cfg, training=False)
+    load_policy_state(agent, run.load_checkpoint(agent.signature(), name=checkpoint_file_name(checkpoint)))
     agent.model.eval()
     agent.disc.eval()
     return TrainedRun(run_dir, run.cfg, agent)
