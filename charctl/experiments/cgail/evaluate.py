@@ -567,6 +567,9 @@ def evaluate(targets: list[str], options: dict, overrides: list[str]) -> None:
 
         check_can_render()  # the filmstrips: a machine that cannot render says so before anything is written
     checkpoint = options.get("checkpoint")
+    for d in run_dirs if checkpoint else []:  # also for the modes that load no policy (--curves)
+        if not (d / "checkpoints" / checkpoint_file_name(checkpoint)).is_file():
+            raise CharctlError(f"checkpoint not found: {d / 'checkpoints' / checkpoint_file_name(checkpoint)}")
     default_out = (
         run_dirs[0] / "eval" / Path(checkpoint_file_name(checkpoint)).stem if checkpoint else run_dirs[0] / "eval"
     )
