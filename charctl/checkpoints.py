@@ -40,6 +40,23 @@ def checkpoint_file_name(name: str | None) -> str:
     return name
 
 
+def kept_checkpoints(run_dir: str | Path, experiment: str) -> list[tuple[int, str]]:
+    """(samples, file name) of RUN/checkpoints/samples_*.pt and last.pt (unless it is one of those), by
+    sample count; last.pt's count is read from its state's "samples"."""
+    run_dir = Path(run_dir)
+    found = []
+    for p in sorted((run_dir / "checkpoints").glob("samples_*.pt")):
+        m = KEPT_CHECKPOINT.fullmatch(p.name)
+        if m:
+            found.append((int(m.group(1)), p.name))
+    last = run_dir / "checkpoints" / "last.pt"
+    if last.is_file():
+        n = int(load_checkpoint(last, experiment)["samples"])
+        if all(n != s for s, _ in found):
+            found.append((n, "last.pt"))
+    return sorted(found)
+
+
 def save_checkpoint(
     path: Path, experiment: str, state: dict, signature: dict | None = None, tb_step: int | None = None
 ) -> Path:

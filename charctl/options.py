@@ -22,6 +22,13 @@ NUMBER_RULES: dict[str, tuple[str, float]] = {
     "crouch_at": (">=", 0.0),
     "episodes": (">=", 1),
     "survival": (">", 0.0),
+    "confusion_k": (">=", 1),
+    "fidelity_k": (">=", 1),
+    "after": (">=", 0.0),
+    "min_no_fall": (">=", 0.0),
+    "min_diagonal": (">=", 0.0),
+    "seed": (">=", 0),
+    "confirm_seed": (">=", 0),
 }
 # options that name a file charctl writes
 OUTPUT_FILES = ("output", "bvh", "video", "onnx", "torchscript")

@@ -23,18 +23,18 @@ CGAIL_DEMO_SCHEDULE := walk:0,run:4,right_kick:8
 repro-cgail-10skill: install ## cgail: the shipped ten-skill run (pretrained/README.md; ~2.3 h on 2 cores), every kept checkpoint evaluated, one picked
 	$(CHARCTL) train cgail scale=small "use_skills=[]" reward.class_form=logratio env.skill_fall_weight=0.5 train.total_samples=50000000 train.checkpoint_every=20 train.keep_checkpoint_every=2500000 $(CGAIL_INTURN) seed=1 output_root=$(CGAIL_SMALL)/ten
 	C=$$(ls -d $(CGAIL_SMALL)/ten/cgail/*/ | tail -1); \
-	$(VENV)/bin/python scripts/eval_checkpoints.py $$C --after 10000000
+	$(CHARCTL) eval $$C --checkpoints --rank margin --after 10000000
 
 repro-cgail-10skill-temperature: install ## cgail: the third ten-skill run, with a learned class temperature (pretrained/cgail-10skill-temperature; ~2 h on 2 cores), every kept checkpoint evaluated
 	$(CHARCTL) train cgail scale=small "use_skills=[]" reward.class_form=logratio env.skill_fall_weight=0.5 disc.learn_class_scale=true train.total_samples=45000000 train.checkpoint_every=20 train.keep_checkpoint_every=2500000 $(CGAIL_INTURN) seed=1 output_root=$(CGAIL_SMALL)/ten-temperature
 	C=$$(ls -d $(CGAIL_SMALL)/ten-temperature/cgail/*/ | tail -1); \
-	$(VENV)/bin/python scripts/eval_checkpoints.py $$C --after 15000000
+	$(CHARCTL) eval $$C --checkpoints --rank margin --after 15000000
 
 repro-cgail-10skill-kl: install ## cgail: the fifth ten-skill run, KL-targeting learning rate (pretrained/cgail-10skill-kl; ~2 h on 2 cores): to 13,189,120 samples in turn, then resumed with the overlapped loop, as it was run; every kept checkpoint evaluated
 	$(CHARCTL) train cgail scale=small "use_skills=[]" reward.class_form=logratio disc.learn_class_scale=true ppo.desired_kl=0.02 ppo.lr_max=1e-4 train.total_samples=13189120 train.checkpoint_every=20 train.keep_checkpoint_every=2500000 $(CGAIL_INTURN) seed=1 output_root=$(CGAIL_SMALL)/ten-kl
 	C=$$(ls -d $(CGAIL_SMALL)/ten-kl/cgail/*/ | tail -1); \
 	$(CHARCTL) train cgail --resume $$C train.total_samples=40000000 train.overlap_update=true && \
-	$(VENV)/bin/python scripts/eval_checkpoints.py $$C --after 15000000
+	$(CHARCTL) eval $$C --checkpoints --rank margin --after 15000000
 
 # The fidelity recipe's 3-skill runs (docs/cgail.md, "Fidelity recipe"): A = per-skill style head, wrong-skill
 # fakes, class head on demonstrations only (w_S 0.8, w_C 0.2, r_C = P(command)), KL-targeting PPO rate; B = A's
@@ -54,7 +54,7 @@ repro-cgail-fidelity: install ## cgail: the fidelity recipe's runs A, B, C and D
 	$(CHARCTL) train cgail --resume $$B reward.low_style_threshold=0.05 reward.low_style_steps=10 train.fidelity_every=1000000 train.total_samples=23724032 && \
 	C=$(CGAIL_FID)/C/cgail/$$(basename $$A); mkdir -p $$C && cp -r $$B/config.yaml $$B/checkpoints $$B/tb $$C/ && \
 	$(CHARCTL) train cgail --resume $$C reward.pose_error_threshold=0.5 train.total_samples=$(CGAIL_FID_SAMPLES) && \
-	$(VENV)/bin/python scripts/eval_checkpoints.py $$B --rank fidelity && $(VENV)/bin/python scripts/eval_checkpoints.py $$C --rank fidelity && \
+	$(CHARCTL) eval $$B --checkpoints --rank fidelity && $(CHARCTL) eval $$C --checkpoints --rank fidelity && \
 	D=$(CGAIL_FID)/D/cgail/$$(basename $$A); mkdir -p $$D/checkpoints && cp -r $$C/config.yaml $$C/tb $$D/ && cp $$C/checkpoints/last.pt $$D/checkpoints/ && \
 	$(CHARCTL) train cgail --resume $$D reward.w_track=0.5 train.total_samples=46579712 && $(CHARCTL) eval $$D --fidelity --survival 5 -k 4
 

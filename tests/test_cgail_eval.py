@@ -149,3 +149,31 @@ def test_bad_schedule_and_wrong_run_are_one_line_errors(smoke_runs, tmp_path):
     (tmp_path / "config.yaml").write_text("experiment: srb\n")
     with pytest.raises(CharctlError, match="not a cgail run"):
         load_trained_run(tmp_path)
+
+
+def test_eval_checkpoints_picks_by_margin_and_lists_every_kept_checkpoint(smoke_run_copy, charctl_main):
+    """`charctl eval RUN --checkpoints --rank margin` (was scripts/eval_checkpoints.py): margin = the smaller
+    of (worst no-fall - target) and (min diagonal - target); on the smoke run it evaluates the kept
+    checkpoints and last.pt once each (last.pt is the 1024 one, listed once) and writes the table, JSON and plot."""
+    from charctl.checkpoints import kept_checkpoints
+    from charctl.experiments.cgail.eval_checkpoints import margin
+
+    assert abs(margin(0.85, 0.95, 0.8, 0.9) - 0.05) < 1e-12
+    assert abs(margin(0.95, 0.85, 0.8, 0.9) + 0.05) < 1e-12
+    src = smoke_run_copy("cgail")
+    from charctl.commands.train import train_command
+
+    train_command("cgail", ["train.total_samples=1024", "train.keep_checkpoint_every=512"], resume=src)
+    assert [n for n, _ in kept_checkpoints(src, "cgail")] == [1024]
+    argv = ["eval", str(src), "--checkpoints", "--survival", "0.5", "-k", "2", "--confusion-k", "1", "--rank", "margin"]
+    res = charctl_main(*argv)
+    assert res.returncode == 0, res.stdout + res.stderr
+    report = json.loads((src / "eval" / "checkpoints.json").read_text())
+    assert [r["samples"] for r in report["rows"]] == [1024]
+    assert report["chosen"]["checkpoint"] == "samples_000001024.pt" and report["confirm"]["seed"] == 7
+    assert (src / "eval" / "checkpoints.png").is_file() and (src / "eval" / "checkpoints.md").is_file()
+    survival = src / "eval" / "samples_000001024" / "survival.json"
+    before = survival.stat().st_mtime_ns
+    assert charctl_main(*argv).returncode == 0  # same settings: the kept result is reused, nothing is evaluated again
+    assert survival.stat().st_mtime_ns == before
+    assert json.loads((src / "eval" / "checkpoints.json").read_text())["rows"] == report["rows"]

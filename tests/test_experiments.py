@@ -18,7 +18,7 @@ from charctl.config import BaseConfig
 from charctl.errors import CharctlError
 from charctl.experiments import EXPERIMENTS, ROLES, Experiment, load, providers
 
-from conftest import REPO, assert_one_line, run_charctl
+from conftest import REPO, assert_one_line, assert_one_line_error, run_charctl
 
 NAMES = list(EXPERIMENTS)
 PACKAGE_DIR = REPO / "charctl" / "experiments"
@@ -84,6 +84,20 @@ def test_group_help_lists_the_experiments(charctl_main):
 def test_an_option_of_another_experiment_is_refused(charctl_main):
     res = charctl_main("eval", "srb", "--dtw")
     assert res.returncode != 0 and "--dtw" in res.stderr
+
+
+def test_checkpoints_on_an_experiment_without_them_names_those_that_have_them(charctl_main):
+    """`charctl eval NAME --checkpoints` is parsed for every experiment (not listed in its --help where it
+    does not apply); one without a `checkpoints` entry point says which experiments have one."""
+    from charctl.experiments import supporting
+
+    have = supporting("checkpoints")
+    assert have == [n for n in NAMES if load(n).checkpoints] and "cgail" in have
+    for name in (n for n in NAMES if n not in have):
+        res = charctl_main("eval", name, "--checkpoints")
+        assert_one_line_error(res, name, "--checkpoints", *have)
+    res = charctl_main("eval", "cgail", "--survival", "5", "--after", "1000")  # a --checkpoints option alone
+    assert_one_line_error(res, "--after", "--checkpoints")
 
 
 def test_generic_layer_names_no_experiment():

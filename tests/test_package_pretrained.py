@@ -63,34 +63,3 @@ def test_packaging_a_kept_checkpoint_cuts_the_scalars_at_it(smoke_run_copy, tmp_
     steps, _ = read_scalars(dest / "tb")["train/episode_length"]
     assert max(steps) == 768 and max(read_scalars(src / "tb")["train/episode_length"][0]) == 1024
     assert json.loads((dest / "metrics.json").read_text())["packaged_checkpoint"]["samples"] == 768
-
-
-def test_eval_checkpoints_picks_by_margin_and_lists_every_kept_checkpoint(smoke_run_copy, tmp_path, monkeypatch):
-    """scripts/eval_checkpoints.py: margin = the smaller of (worst no-fall - target) and (min diagonal -
-    target); on the smoke run it evaluates the kept checkpoints and last.pt once each (last.pt is the
-    1024 one, listed once) and writes the table, JSON and plot."""
-    import json
-
-    spec = importlib.util.spec_from_file_location("eval_checkpoints", SCRIPT.parent / "eval_checkpoints.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    assert abs(mod.margin(0.85, 0.95, 0.8, 0.9) - 0.05) < 1e-12
-    assert abs(mod.margin(0.95, 0.85, 0.8, 0.9) + 0.05) < 1e-12
-    src = smoke_run_copy("cgail")
-    from charctl.commands.train import train_command
-
-    train_command("cgail", ["train.total_samples=1024", "train.keep_checkpoint_every=512"], resume=src)
-    assert [n for n, _ in mod.kept_checkpoints(src)] == [1024]
-    monkeypatch.setattr(
-        "sys.argv", ["eval_checkpoints.py", str(src), "--seconds", "0.5", "-k", "2", "--confusion-k", "1"]
-    )
-    mod.main()
-    report = json.loads((src / "eval" / "checkpoints.json").read_text())
-    assert [r["samples"] for r in report["rows"]] == [1024]
-    assert report["chosen"]["checkpoint"] == "samples_000001024.pt" and report["confirm"]["seed"] == 7
-    assert (src / "eval" / "checkpoints.png").is_file() and (src / "eval" / "checkpoints.md").is_file()
-    survival = src / "eval" / "samples_000001024" / "survival.json"
-    before = survival.stat().st_mtime_ns
-    mod.main()  # same settings: the kept result is reused, nothing is evaluated again
-    assert survival.stat().st_mtime_ns == before
-    assert json.loads((src / "eval" / "checkpoints.json").read_text())["rows"] == report["rows"]

@@ -18,7 +18,7 @@ import typer
 from typer.core import TyperGroup
 
 from charctl.errors import CharctlError
-from charctl.experiments import EXPERIMENTS, Experiment, Option, experiment_of, load, names
+from charctl.experiments import CHECKPOINTS, EXPERIMENTS, Experiment, Option, experiment_of, load, names
 
 VERBS = {"eval": "Evaluate", "export": "Export"}
 TARGETS_HELP = {
@@ -27,10 +27,10 @@ TARGETS_HELP = {
 }
 
 
-def _annotation(option: Option) -> Any:
-    """The typed, Typer-annotated parameter of one declared option."""
+def _annotation(option: Option, hidden: bool = False) -> Any:
+    """The typed, Typer-annotated parameter of one declared option (`hidden`: parsed, not in --help)."""
     decls = [option.flag, *([option.short] if option.short else [])]
-    info = typer.Option(*decls, help=option.help, show_default=False, metavar=option.metavar or None)
+    info = typer.Option(*decls, help=option.help, show_default=False, metavar=option.metavar or None, hidden=hidden)
     if option.kind is bool and option.nargs == 1:
         return Annotated[bool, info]
     kind = tuple[(option.kind,) * option.nargs] if option.nargs > 1 else option.kind  # type: ignore[misc]
@@ -41,10 +41,18 @@ def _default(option: Option) -> Any:
     return False if option.kind is bool and option.nargs == 1 else None
 
 
+def _hidden_options(exp: Experiment, command: str) -> tuple[Option, ...]:
+    """Options every experiment's command parses but only some declare: `eval --checkpoints` on an
+    experiment without it reaches the command, which names the experiments that have it."""
+    declared = {o.name for o in exp.options(command)}
+    return (CHECKPOINTS,) if command == "eval" and CHECKPOINTS.name not in declared else ()
+
+
 def experiment_command(exp: Experiment, command: str, run: Callable[[list[str], dict[str, Any]], None]) -> Any:
     """A click command `charctl <command> <exp.name>` with the experiment's options; calls
     run(targets, options) with every positional argument (the first is the selecting target)."""
     options = exp.options(command)
+    hidden = _hidden_options(exp, command)
     params = [
         inspect.Parameter(
             "targets",
@@ -56,8 +64,10 @@ def experiment_command(exp: Experiment, command: str, run: Callable[[list[str], 
         )
     ]
     params += [
-        inspect.Parameter(o.name, inspect.Parameter.KEYWORD_ONLY, default=_default(o), annotation=_annotation(o))
-        for o in options
+        inspect.Parameter(
+            o.name, inspect.Parameter.KEYWORD_ONLY, default=_default(o), annotation=_annotation(o, o in hidden)
+        )
+        for o in (*options, *hidden)
     ]
 
     def callback(targets: list[str] | None = None, **values: Any) -> None:

@@ -20,8 +20,9 @@ def split_targets(targets: list[str]) -> tuple[list[str], list[str]]:
 
 def eval_command(targets: list[str], options: dict) -> None:
     """The first target (an experiment name or a run directory) selects the experiment; the options
-    it declares are checked and every target and override is handed to its `evaluate`."""
-    from charctl.experiments import experiment_of, select_options
+    it declares are checked and every target and override is handed to its `evaluate` (with
+    --checkpoints: to charctl.commands.eval_checkpoints and the experiment's `checkpoints`)."""
+    from charctl.experiments import experiment_of, select_options, supporting
     from charctl.options import check_options
 
     check_options(options)  # -k >= 1, finite numbers, a writable -o: before any work or file
@@ -31,10 +32,19 @@ def eval_command(targets: list[str], options: dict) -> None:
         raise CharctlError("name an experiment or a run directory: charctl eval EXPERIMENT|RUN_DIR ...")
     exp = experiment_of(rest[0])
     _check_runs_belong(exp, rest[1:])
+    if options.get("checkpoints") and not exp.checkpoints:
+        raise CharctlError(
+            f"{exp.name} does not evaluate its kept checkpoints; --checkpoints is supported by "
+            f"{', '.join(supporting('checkpoints')) or 'no experiment'}"
+        )
     chosen = select_options(exp, "eval", options)
     modes = [o for o in exp.eval_options if o.mode]
     if not any(chosen[o.name] not in (None, False) for o in modes):
         raise CharctlError(f"say what to evaluate: {', '.join(o.flag for o in modes)}")
+    if chosen.get("checkpoints"):
+        from charctl.commands.eval_checkpoints import eval_checkpoints
+
+        return eval_checkpoints(exp, rest, chosen, overrides)
     exp.entry("evaluate")(rest, chosen, overrides)
 
 

@@ -63,7 +63,7 @@ def body_distances(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 def tile_index(frames: int, clip_frames: int, loop: bool) -> np.ndarray:
     """Clip frame index of each frame of the DTW reference: a looping clip is tiled (its last frame,
     which closes the loop, dropped between repeats) to `frames` frames when it is shorter, as
-    `charctl.experiments.cgail.evaluate.skill_reference` tiles rotations; any other clip is used once."""
+    `charctl.experiments.cgail.metrics.skill_reference` tiles rotations; any other clip is used once."""
     if not loop or frames <= clip_frames or clip_frames < 2:
         return np.arange(clip_frames)
     reps = int(np.ceil(frames / (clip_frames - 1)))

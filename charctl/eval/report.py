@@ -1,14 +1,23 @@
-"""Evaluation output shared by the experiments: tables (terminal and Markdown), JSON, and a report.md
-that each evaluation mode appends its table to."""
+"""Evaluation output shared by the experiments: tables (terminal, Markdown and CSV), JSON, and a report.md
+that each evaluation mode appends its table to.
+
+    rows = {"walk": {"error": 0.12, "falls": 0}, "run": {"error": 0.3, "falls": 1}}   # name -> column -> value
+    markdown_table(rows, ["error", "falls"])       # | | error | falls |  ...  (cells: fmt_cell)
+    write_csv(out / "t.csv", rows, ["error", "falls"], index="skill")
+    write_json(out / "t.json", {"table": rows})    # numpy values converted, NaN / inf -> null
+    append_report(out, "Title", markdown_table(rows, cols), "how it was measured", header="# my report\n")
+"""
 
 from __future__ import annotations
 
+import csv
+import io
 import json
 from pathlib import Path
 
 import numpy as np
 
-REPORT_HEADER = "# cgail evaluation report\n\nPaper values: Table 6.1 (docs/cgail.md). Produced by charctl.\n"
+REPORT_HEADER = "# Evaluation report\n\nProduced by charctl.\n"  # an experiment passes its own header
 
 
 def fmt_cell(v) -> str:
@@ -26,6 +35,24 @@ def markdown_table(rows: dict, cols: list[str]) -> str:
     for name, row in rows.items():
         lines.append(f"| {name} | " + " | ".join(fmt_cell(row.get(c)) for c in cols) + " |")
     return "\n".join(lines)
+
+
+def markdown_row(cells) -> str:
+    """One Markdown table row of the cells as str(): | a | b |."""
+    return "| " + " | ".join(str(c) for c in cells) + " |"
+
+
+def write_csv(path: Path, rows: dict, cols: list[str], index: str = "") -> None:
+    """rows (name -> {column: value}) as CSV, written atomically: a header `index, *cols`, then one line
+    per name with its cells as `fmt_cell` writes them (csv's own line ends, \\r\\n)."""
+    from charctl.files import atomic_write_text
+
+    buf = io.StringIO(newline="")
+    w = csv.writer(buf)
+    w.writerow([index, *cols])
+    for name, row in rows.items():
+        w.writerow([name, *[fmt_cell(row.get(c)) for c in cols]])
+    atomic_write_text(path, buf.getvalue())
 
 
 def print_table(title: str, rows: dict, cols: list[str]) -> None:

@@ -10,9 +10,14 @@ references, imported only when called:
     evaluate  evaluate(targets, options, overrides)      `charctl eval NAME|RUN... [options]`
     export    export(target, options, overrides)         `charctl export NAME|RUN [options]`
     play      play(run_dir)                              `charctl play NAME|RUN` (optional)
+    checkpoints  checkpoints(targets, options, overrides) -> CheckpointEvaluation
+                                                         `charctl eval NAME|RUN --checkpoints` (optional)
 
 `eval_options` / `export_options` declare the command-line options the experiment adds to
 `charctl eval` / `charctl export`; the CLI builds each experiment's option set from them.
+`charctl eval RUN --checkpoints` evaluates every kept checkpoint of a run and picks one: the loop,
+the choice and its confirmation on fresh starts are the command's (charctl/commands/eval_checkpoints.py),
+what is measured per checkpoint and how it is ranked the experiment's `checkpoints` entry point.
 `provides` names optional capabilities another experiment may use through the registry (never by
 importing the provider), e.g. cgail's `push_rollout` is srb's full-body push baseline.
 `tune_metrics` names the scalars the experiment logs as it trains (TensorBoard names, or
@@ -42,7 +47,7 @@ EXPERIMENTS: dict[str, str] = {
     "hopper-ga": "charctl.experiments.hopper_ga",
 }
 
-ROLES = ("schema", "train", "evaluate", "export", "play")
+ROLES = ("schema", "train", "evaluate", "export", "play", "checkpoints")
 
 
 @dataclass(frozen=True)
@@ -50,7 +55,8 @@ class Option:
     """One command-line option an experiment adds to `charctl eval` or `charctl export`.
 
     `kind` is bool (a flag), int, float, str or Path; `nargs` > 1 takes that many values (a tuple).
-    A `mode` option says what to evaluate: `charctl eval` needs at least one mode option.
+    A `mode` option says what to evaluate: `charctl eval` needs at least one mode option. An option
+    that `requires` another (e.g. "checkpoints") is refused without it.
     """
 
     name: str  # Python name; the flag is --name-with-dashes
@@ -60,6 +66,7 @@ class Option:
     nargs: int = 1
     mode: bool = False
     metavar: str = ""
+    requires: str = ""  # the name of an option this one only refines (one-line error without it)
 
     @property
     def flag(self) -> str:
@@ -77,6 +84,7 @@ class Experiment:
     evaluate: str = ""
     export: str = ""
     play: str = ""
+    checkpoints: str = ""  # "module:factory" of `charctl eval RUN --checkpoints` (a CheckpointEvaluation)
     eval_options: tuple[Option, ...] = ()
     export_options: tuple[Option, ...] = ()
     provides: Mapping[str, str] = field(default_factory=dict)  # capability -> module implementing it
@@ -116,6 +124,28 @@ class PushRollout(Protocol):
 
     def baseline_label(self, run_dir: str) -> str:
         """Column label of the run in the push table."""
+
+
+class CheckpointEvaluation(Protocol):
+    """What an experiment's `checkpoints` entry point returns for `charctl eval RUN --checkpoints`: built
+    from the command's targets, options and overrides, every one of them checked (nothing is written
+    before it returns). The command evaluates each kept checkpoint with `evaluate`, picks the largest
+    `rank_key`, evaluates that one again with `confirm_seed`, writes checkpoints.json and calls `write_report`."""
+
+    run_dir: Path  # the run whose checkpoints/ are evaluated
+    out: Path  # folder of the results: out/<checkpoint stem>/, out/checkpoints.*
+    seed: int  # starts of the selection evaluation
+    confirm_seed: int  # fresh starts of the chosen checkpoint's second evaluation
+
+    def evaluate(self, name: str, samples: int, out: Path, seed: int, confirm: bool = False) -> dict:
+        """The row of checkpoint file `name` (`samples` samples), its files in `out` (reused when unchanged);
+        it names "checkpoint" and "samples"."""
+
+    def rank_key(self, row: dict) -> tuple:
+        """Sort key of a row under the chosen selection rule (larger is better)."""
+
+    def write_report(self, rows: list[dict], chosen: dict, confirm: dict) -> str:
+        """Write the table and figures beside checkpoints.json; returns the table's text."""
 
 
 def names() -> list[str]:
@@ -158,6 +188,18 @@ def experiment_of(target: str | Path) -> Experiment:
     )
 
 
+def supporting(role: str) -> list[str]:
+    """The registered (and built) experiments that declare entry point `role`."""
+    found = []
+    for name in EXPERIMENTS:
+        try:
+            if getattr(load(name), role, ""):
+                found.append(name)
+        except CharctlError:  # not built in this version
+            continue
+    return found
+
+
 def latest_run_dir(name: str, overrides: Sequence[str] = ()) -> Path:
     """The newest run of `name` with a checkpoint under its configured `output_root`."""
     from charctl.config import compose_config
@@ -176,9 +218,13 @@ def select_options(exp: Experiment, command: str, options: Mapping[str, Any]) ->
         given = ", ".join(_flag(e) for e in extra)
         supported = ", ".join(o.flag for o in exp.options(command))
         raise CharctlError(f"{exp.name} does not support {given}; it supports {supported}")
-    return {
+    chosen = {
         o.name: options.get(o.name, False if o.kind is bool and o.nargs == 1 else None) for o in exp.options(command)
     }
+    for o in exp.options(command):
+        if o.requires and chosen[o.name] not in (None, False) and chosen.get(o.requires) in (None, False):
+            raise CharctlError(f"{o.flag} applies to {_flag(o.requires)} only; give {_flag(o.requires)} too")
+    return chosen
 
 
 def _flag(name: str) -> str:
@@ -197,3 +243,18 @@ BVH = Option("bvh", "write a BVH of the policy/generated motion", Path)
 VIDEO = Option("video", "write an mp4 of the policy/generated motion", Path)
 SECONDS = Option("seconds", "length of a generated rollout", float)
 FPS = Option("fps", "resample to this frame rate", float)
+# `charctl eval RUN --checkpoints` (an experiment with a `checkpoints` entry point declares these)
+CHECKPOINTS = Option(
+    "checkpoints",
+    "evaluate every kept checkpoint of the run (train.keep_checkpoint_every, and last.pt), pick one by --rank "
+    "and evaluate it again on fresh starts: RUN/eval/checkpoints.{json,md,png}; re-runs evaluate new ones only",
+    mode=True,
+)
+AFTER = Option("after", "with --checkpoints: skip checkpoints before this many samples", float, requires="checkpoints")
+SEED = Option("seed", "with --checkpoints: seed of the selection evaluation's starts", int, requires="checkpoints")
+CONFIRM_SEED = Option(
+    "confirm_seed",
+    "with --checkpoints: seed of the fresh starts the chosen checkpoint is evaluated on again",
+    int,
+    requires="checkpoints",
+)

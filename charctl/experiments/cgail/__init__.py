@@ -7,7 +7,19 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from charctl.experiments import BVH, EPISODES, OUT, SECONDS, VIDEO, Experiment, Option
+from charctl.experiments import (
+    AFTER,
+    BVH,
+    CHECKPOINTS,
+    CONFIRM_SEED,
+    EPISODES,
+    OUT,
+    SECONDS,
+    SEED,
+    VIDEO,
+    Experiment,
+    Option,
+)
 
 _PKG = "charctl.experiments.cgail"
 CHECKPOINT = Option(
@@ -25,6 +37,7 @@ EXPERIMENT = Experiment(
     evaluate=f"{_PKG}.evaluate:evaluate",
     export=f"{_PKG}.export:export",
     play=f"{_PKG}.export:play",
+    checkpoints=f"{_PKG}.eval_checkpoints:checkpoints",
     eval_options=(
         Option("dtw", "DTW pose error against the reference clips (Table 6.1)", mode=True),
         Option("confusion", "classifier confusion matrix (Fig 6.8)", mode=True),
@@ -42,6 +55,34 @@ EXPERIMENT = Experiment(
         EPISODES,
         OUT,
         CHECKPOINT,
+        Option(
+            CHECKPOINTS.name,
+            CHECKPOINTS.help + "; per checkpoint: no-fall over -k (default 64) episodes of --survival SECONDS "
+            "(default 5) per skill, the Fig 6.8 diagonal and, with --fidelity or --rank fidelity, fidelity",
+            mode=True,
+        ),
+        Option(
+            "rank",
+            "with --checkpoints: fidelity (default: the largest lowest pose coverage over the skills, then the worst "
+            "no-fall, then the lowest diagonal; implies --fidelity) or margin (the largest margin over both targets)",
+            str,
+            metavar="fidelity|margin",
+            requires="checkpoints",
+        ),
+        Option(
+            "confusion_k",
+            "with --checkpoints: episodes per skill for the Fig 6.8 diagonal (default 16)",
+            int,
+            requires="checkpoints",
+        ),
+        Option(
+            "fidelity_k", "with --checkpoints: episodes per skill for fidelity (default 4)", int, requires="checkpoints"
+        ),
+        Option("min_no_fall", "with --checkpoints: the no-fall target (default 0.8)", float, requires="checkpoints"),
+        Option("min_diagonal", "with --checkpoints: the diagonal target (default 0.9)", float, requires="checkpoints"),
+        AFTER,
+        SEED,
+        CONFIRM_SEED,
     ),
     export_options=(
         Option("onnx", "export the policy (normaliser built in) as ONNX", Path),

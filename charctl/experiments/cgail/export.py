@@ -20,6 +20,8 @@ from torch import nn
 from charctl.errors import CharctlError
 from charctl.experiments.cgail.policy import TrainedRun, load_trained_run, resolve_run_dirs
 
+WHAT_TO_EXPORT = "say what to export: --onnx FILE, --torchscript FILE, --bvh FILE, --video FILE or --web DIR"
+
 
 class ExportedPolicy(nn.Module):
     """state (B, 243) [, command blend (B, K)] -> mean action (B, 28); normaliser built in."""
@@ -120,6 +122,8 @@ def export(target: str, options: dict, overrides: list[str]) -> None:
     (run_dir,) = resolve_run_dirs([target], overrides, "export")
     if options.get("serve") and not options.get("web"):
         raise CharctlError("--serve serves the site --web DIR writes: give --web DIR too")
+    if not any(options.get(k) for k in ("onnx", "torchscript", "bvh", "video", "web")):
+        raise CharctlError(WHAT_TO_EXPORT)
     if options.get("web"):
         from charctl.experiments.cgail.web_site import check_web_sources
 
@@ -128,13 +132,19 @@ def export(target: str, options: dict, overrides: list[str]) -> None:
     # every argument is checked before anything is written (the schedule names the run's skills)
     names = tr.skill_names
     schedule = parse_schedule(options.get("commands") or f"{names[0]}:0", names)
-    did = False
+    if options.get("web") and tr.cfg.reward.kind == "tracking":
+        raise CharctlError(
+            f"{run_dir} is a tracking run: its policy needs the reference clip's phase, which the web demo "
+            "does not play; export a cgail (adversarial) run"
+        )
+    if options.get("video"):
+        from charctl.experiments.cgail.fidelity import check_can_render
+
+        check_can_render()  # a machine that cannot render says so before the other files are written
     if options.get("onnx"):
         print(f"wrote {export_onnx(tr, Path(options['onnx']))}")
-        did = True
     if options.get("torchscript"):
         print(f"wrote {export_torchscript(tr, Path(options['torchscript']))}")
-        did = True
     if options.get("bvh") or options.get("video"):
         seconds = float(options.get("seconds") or (schedule[-1][0] + 3.0))
         qpos, stats = schedule_rollout(tr, schedule, seconds)
@@ -154,15 +164,9 @@ def export(target: str, options: dict, overrides: list[str]) -> None:
                 load_model(tr.cfg.env.physics_hz, armature=tr.cfg.env.armature), qpos, options["video"], stats["fps"]
             )
             print(f"wrote {options['video']} ({info['frames']} frames, falls: {stats['falls']})")
-        did = True
     if options.get("web"):
         from charctl.experiments.cgail.web_site import serve, write_site
 
-        if tr.cfg.reward.kind == "tracking":
-            raise CharctlError(
-                f"{run_dir} is a tracking run: its policy needs the reference clip's phase, which the web demo "
-                "does not play; export a cgail (adversarial) run"
-            )
         out = Path(options["web"])
         info = write_site(tr, out, options.get("checkpoint"))
         how = (
@@ -173,9 +177,6 @@ def export(target: str, options: dict, overrides: list[str]) -> None:
         print(f"wrote {out} ({info['files']} files, {info['bytes'] / 1e6:.1f} MB){how}")
         if options.get("serve"):
             serve(out)
-        did = True
-    if not did:
-        raise CharctlError("say what to export: --onnx FILE, --torchscript FILE, --bvh FILE, --video FILE or --web DIR")
 
 
 def _display_problem() -> str | None:

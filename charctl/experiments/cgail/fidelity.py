@@ -3,7 +3,7 @@
 Per skill of the run, against that skill's clip (the skill data the agent loads: a `:mirror` clip is
 the mirrored one):
 
-- rollouts as the other evaluation modes make them (`evaluate.rollout_skill`): the skill commanded
+- rollouts as the other evaluation modes make them (`rollouts.rollout_skill`): the skill commanded
   and held (no switching), deterministic mean actions, reference-state initialisation at the clip's
   frame 0 without a random yaw. Episodes last one clip length or 5 s, whichever is longer (every
   shipped clip is shorter than 5 s, so 5 s, 151 frames at 30 Hz); the world positions and rotations
@@ -243,7 +243,8 @@ def check_can_render() -> None:
 def eval_fidelity(runs: list, episodes: int, out: Path, seed: int = 2468, filmstrips: bool = True) -> dict:
     """`charctl eval RUN... --fidelity [-k N]`: per run and skill, fidelity.json, a table in report.md
     and (with `filmstrips`) fidelity_<skill>.png (fidelity_<run>_<skill>.png for several runs)."""
-    from charctl.eval.report import append_report, markdown_table, print_table, write_json
+    from charctl.eval.report import markdown_table, print_table, write_json
+    from charctl.experiments.cgail.report import append_report
 
     labels = [tr.label for tr in runs]
     several = len(runs) > 1

@@ -22,6 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from charctl.errors import CharctlError
+from charctl.eval.report import markdown_row
 from charctl.experiments.com_cnn.checkpoint import load_run, resolve_targets
 from charctl.experiments.com_cnn.data import (
     BodyModel,
@@ -262,10 +263,6 @@ def plot_ar_curves(ar: dict, fps: float, path: Path) -> None:
     save_figure(fig, path)
 
 
-def _row(cells) -> str:
-    return "| " + " | ".join(str(c) for c in cells) + " |"
-
-
 def render_report(res: dict) -> str:
     """Markdown: Table 5 style comparison, autoregressive curve, training/generation numbers, DTW."""
     types = list(dict.fromkeys([*res["motion_types"], "other"]))
@@ -290,12 +287,12 @@ def render_report(res: dict) -> str:
             "in cgail's eq. 6.1) after DTW alignment to the ground truth; "
             "frame by frame without alignment in brackets.",
             "",
-            _row(["model", *types, "all"]),
-            _row(["---"] * (len(types) + 2)),
+            markdown_row(["model", *types, "all"]),
+            markdown_row(["---"] * (len(types) + 2)),
         ]
         for name, r in res["dtw"].items():
             lines.append(
-                _row(
+                markdown_row(
                     [
                         name,
                         *[
@@ -317,12 +314,12 @@ def _teacher_forced_section(res: dict, types: list[str]) -> list[str]:
         "between the predicted and the true local rotation, "
         "averaged over the movable joints and every frame of the held-out clips.",
         "",
-        _row(["model", *types, "all", "frames"]),
-        _row(["---"] * (len(types) + 3)),
+        markdown_row(["model", *types, "all", "frames"]),
+        markdown_row(["---"] * (len(types) + 3)),
     ]
     for name, r in res["teacher_forced"].items():
         lines.append(
-            _row(
+            markdown_row(
                 [
                     name,
                     *[f"{r['per_type'][t]:.2f}" if t in r["per_type"] else "–" for t in types],
@@ -333,17 +330,17 @@ def _teacher_forced_section(res: dict, types: list[str]) -> list[str]:
         )
     paper = res["paper_table5"]
     lines.append(
-        _row(["paper Table 5 (its own mocap; units not stated)", *[paper.get(t, "–") for t in types], "–", "–"])
+        markdown_row(["paper Table 5 (its own mocap; units not stated)", *[paper.get(t, "–") for t in types], "–", "–"])
     )
     lines += [
         "",
         "Per clip (teacher forcing, degrees):",
         "",
-        _row(["model", *res["test_clips"]]),
-        _row(["---"] * (len(res["test_clips"]) + 1)),
+        markdown_row(["model", *res["test_clips"]]),
+        markdown_row(["---"] * (len(res["test_clips"]) + 1)),
     ]
     for name, r in res["teacher_forced"].items():
-        lines.append(_row([name, *[f"{r['per_clip'].get(c, float('nan')):.2f}" for c in res["test_clips"]]]))
+        lines.append(markdown_row([name, *[f"{r['per_clip'].get(c, float('nan')):.2f}" for c in res["test_clips"]]]))
     return lines
 
 
@@ -364,14 +361,14 @@ def _autoregressive_section(res: dict, types: list[str]) -> list[str]:
         "",
         "![autoregressive error](ar_curve.png)",
         "",
-        _row(["model", "type", *[f"{h / fps:.2f} s" for h in marks], "root xz error at the end (m)"]),
-        _row(["---"] * (len(marks) + 3)),
+        markdown_row(["model", "type", *[f"{h / fps:.2f} s" for h in marks], "root xz error at the end (m)"]),
+        markdown_row(["---"] * (len(marks) + 3)),
     ]
     for name, r in ar.items():
         for key in ["all", *[t for t in types if t in r["curve_deg"]]]:
             c = r["curve_deg"][key]
             lines.append(
-                _row(
+                markdown_row(
                     [
                         name,
                         key,
@@ -388,7 +385,7 @@ def _speed_section(res: dict) -> list[str]:
         "",
         "## Training and generation",
         "",
-        _row(
+        markdown_row(
             [
                 "model",
                 "steps",
@@ -401,12 +398,12 @@ def _speed_section(res: dict) -> list[str]:
                 "COM tracking (cm)",
             ]
         ),
-        _row(["---"] * 9),
+        markdown_row(["---"] * 9),
     ]
     for name, t in res["training"].items():
         g = res["generation"][name]
         lines.append(
-            _row(
+            markdown_row(
                 [
                     name,
                     t.get("step"),

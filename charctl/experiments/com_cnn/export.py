@@ -17,11 +17,15 @@ from charctl.experiments.com_cnn.generate import (
     write_generic_bvh,
 )
 
+VIDEO_NEEDS_HUMANOID = "--video renders the DeepMimic humanoid; this run was trained on data.bvh_dir (use --bvh)"
+
 
 def export(target: str, options: dict, overrides: list[str]) -> None:
     """Generate from `--com-path` (default generate.com_path) and write `--bvh` / `--video`, the clamped
     input COM as CSV and a plot next to it."""
     run = load_run(resolve_targets([target], overrides)[0], overrides)
+    if options.get("video") is not None and run.body.kind != "humanoid":
+        raise CharctlError(VIDEO_NEEDS_HUMANOID)  # before the CSV, plot and BVH beside it are written
     g, fps = run.cfg.generate, float(run.cfg.data.fps)
     spec = options.get("com_path") or str(g.com_path)
     out = generate_motion(run, spec, float(options.get("seconds") or g.seconds), options.get("crouch_at"))
@@ -49,10 +53,6 @@ def export(target: str, options: dict, overrides: list[str]) -> None:
             write_generic_bvh(run.body, *frames, fps, Path(bvh))
         print(f"wrote {bvh} (frames 0-{L - 1}: seed from the data, {L}-{L + H - 1}: generated)")
     if video is not None:
-        if run.body.kind != "humanoid":
-            raise CharctlError(
-                "--video renders the DeepMimic humanoid; this run was trained on data.bvh_dir (use --bvh)"
-            )
         info = render_with_com(
             frames_to_clip(run, "generated", *frames), np.concatenate([out["seed"].com, out["com_path"]]), Path(video)
         )

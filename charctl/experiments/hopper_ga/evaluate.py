@@ -25,11 +25,12 @@ def evaluate(targets: list[str], options: dict, overrides: list[str]) -> None:
 def build_report(dirs: list[Path], out: Path | None, overrides: list[str] | None = None) -> list[dict]:
     """Re-draw every run's figures (into the run, or OUT/<run>/), print the table; with `out`,
     write OUT/report.md (table, GA wall times, figures, brisk-vs-normal comparison)."""
-    rows = []
-    for d in dirs:
+    loaded = []
+    for d in dirs:  # every run opened and read before the first figure is written
         run, s = open_hopper_run(d, overrides)
-        history = _history(run)
-        genome, _ = load_best(d)
+        loaded.append((d, run, s, _history(run), load_best(d)[0]))
+    rows = []
+    for d, run, s, history, genome in loaded:
         fig_dir = Path(out) / d.name if out else Path(d)
         numbers = write_outputs(fig_dir, history, genome, s, run.cfg)
         metrics = json.loads((Path(d) / "metrics.json").read_text()) if (Path(d) / "metrics.json").is_file() else {}

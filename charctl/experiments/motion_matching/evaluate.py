@@ -31,10 +31,10 @@ def evaluate(targets: list[str], options: dict, overrides: list[str]) -> None:
     if not options.get("sweep"):
         raise CharctlError("motion-matching evaluates with --sweep (the Table 1 feature study)")
     cfg = load_config(targets, overrides)
+    cases, paths = sweep_plan(cfg)  # every case and path checked before the output folder is made
     out = output_dir(cfg, options.get("out"))
-    n = len(cfg.sweep.cases) or len(TABLE1)
-    with TrainingProgress(n, "Table 1 sweep", unit="cases") as bar:
-        payload = run_sweep(cfg, out, progress=lambda case: bar.update(1, case=case))
+    with TrainingProgress(len(cases), "Table 1 sweep", unit="cases") as bar:
+        payload = run_sweep(cfg, out, progress=lambda case: bar.update(1, case=case), plan=(cases, paths))
     (out / "metrics.json").write_text(json.dumps({k: v for k, v in payload.items() if k != "cases"}, indent=2))
     print((out / "sweep.md").read_text())
     print(
@@ -58,19 +58,26 @@ def output_dir(cfg, out: str | Path | None) -> Path:
 
 
 # ---------------------------------------------------------------------------- running the sweep
-def run_sweep(cfg, out_dir: Path, progress=None) -> dict:
-    """Run the cases of cfg.sweep on its paths; write sweep.json, sweep.md and PNG plots to out_dir."""
-    from charctl.experiments.motion_matching.database import build_database
+def sweep_plan(cfg) -> tuple[list[int], dict]:
+    """(the Table 1 cases of cfg.sweep, its target paths by name); an unknown case or path is a one-line error."""
     from charctl.experiments.motion_matching.paths import make_path
-    from charctl.experiments.motion_matching.runtime import run_path
-    from charctl.experiments.motion_matching.search import make_index
-    from charctl.experiments.motion_matching.sources import load_sources
 
     cases = list(cfg.sweep.cases) or sorted(TABLE1)
     bad = [c for c in cases if c not in TABLE1]
     if bad:
         raise CharctlError(f"sweep.cases: {bad[0]} is not a Table 1 case (1..19)")
-    paths = {p: make_path(p, cfg.paths) for p in cfg.sweep.paths}
+    return cases, {p: make_path(p, cfg.paths) for p in cfg.sweep.paths}
+
+
+def run_sweep(cfg, out_dir: Path, progress=None, plan: tuple[list[int], dict] | None = None) -> dict:
+    """Run the cases of cfg.sweep on its paths (`plan`: `sweep_plan(cfg)` when already made); write
+    sweep.json, sweep.md and PNG plots to out_dir."""
+    from charctl.experiments.motion_matching.database import build_database
+    from charctl.experiments.motion_matching.runtime import run_path
+    from charctl.experiments.motion_matching.search import make_index
+    from charctl.experiments.motion_matching.sources import load_sources
+
+    cases, paths = plan or sweep_plan(cfg)
     starts = int(cfg.sweep.starts)
     tic = time.perf_counter()
     sources, info = load_sources(cfg)

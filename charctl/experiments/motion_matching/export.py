@@ -13,6 +13,8 @@ from charctl.errors import CharctlError
 from charctl.experiments.motion_matching.cases import describe, resolve_case
 from charctl.experiments.motion_matching.config import NAME, load_config
 
+FPS_USER_SKELETON = "--fps is not supported for a data.bvh_dir skeleton; the BVH is written at data.fps"
+
 
 def export(target: str, options: dict, overrides: list[str]) -> None:
     """Run the config's path (`path=`, `case=`) and write metrics.json, root_path.csv, path.png and
@@ -31,6 +33,8 @@ def export(target: str, options: dict, overrides: list[str]) -> None:
         raise CharctlError(f"--seconds must be positive, got {seconds}")
     if options.get("video") and cfg.data.bvh_dir:
         raise CharctlError("--video needs the humanoid database; with data.bvh_dir export --bvh only")
+    if options.get("bvh") and options.get("fps") is not None and cfg.data.bvh_dir:
+        raise CharctlError(FPS_USER_SKELETON)
     db = build_database(cfg)
     index = make_index(cfg.runtime.index, db)
     tic = time.perf_counter()
@@ -105,7 +109,7 @@ def write_rollout_bvh(db, rollout, path, fps: float | None = None) -> Path:
     from charctl.experiments.motion_matching.bvh_out import write_user_bvh
 
     if fps is not None:
-        raise CharctlError("--fps is not supported for a data.bvh_dir skeleton; the BVH is written at data.fps")
+        raise CharctlError(FPS_USER_SKELETON)
     local = rollout.pose.copy()
     local[:, 0] = rollout.root_rotation()
     root = np.column_stack([rollout.ground[:, 0], rollout.height, rollout.ground[:, 1]])

@@ -75,6 +75,7 @@ def evaluate(targets: list[str], options: dict, overrides: list[str]) -> None:
         raise CharctlError("-k/--episodes must be >= 1")
     out_dir = Path(options.get("out") or run.path("push"))
     cases = make_cases(cfg.push)
+    simulator = _baseline_simulator(baseline)  # the baseline run checked before the study starts
     print(f"push study: {len(cases)} cases x {trials} trials on {run_dir}")
     t0 = time.perf_counter()
     srb = run_push_study(
@@ -93,7 +94,7 @@ def evaluate(targets: list[str], options: dict, overrides: list[str]) -> None:
             simulate_batch=lambda jobs: srb_push_batch(run, jobs, zero_action=True),
         )
         labels.append("SRB, zero action (QP + PD only)")
-    full, note = _baseline_table(baseline, cases, trials, int(cfg.seed))
+    full, note = _baseline_table(baseline, cases, trials, int(cfg.seed), simulator)
     named["full_body"] = full
     labels.append(_baseline_label(baseline))
     tables = list(named.values())
@@ -133,14 +134,26 @@ def _baseline_label(baseline: str) -> str:
     return rollout.baseline_label(baseline) if rollout is not None else f"full body ({Path(baseline).name})"
 
 
-def _baseline_table(baseline: str, cases, trials: int, seed: int) -> tuple[PushTable | None, str]:
+def _baseline_simulator(baseline: str):
+    """(the full-body baseline's push simulator, or None; the note the report gives when there is none).
+    A baseline that is not a run, or a run its experiment cannot push, is a one-line error here."""
     if not baseline:
         return None, NO_BASELINE
     rollout = _push_rollout(baseline)
     if rollout is None:
         return None, f"{baseline} is not a run of an experiment that provides a push rollout"
+    return rollout.make_push_simulator(baseline), ""
+
+
+def _baseline_table(
+    baseline: str, cases, trials: int, seed: int, simulator: tuple | None = None
+) -> tuple[PushTable | None, str]:
+    """The baseline's push table and the report's note (`simulator`: `_baseline_simulator(baseline)` when made)."""
+    simulate, note = simulator if simulator is not None else _baseline_simulator(baseline)
+    if simulate is None:
+        return None, note
     t0 = time.perf_counter()
-    table = run_push_study(rollout.make_push_simulator(baseline), cases, trials, seed=seed, label="full body")
+    table = run_push_study(simulate, cases, trials, seed=seed, label="full body")
     table.meta = {"run": baseline, "seconds": time.perf_counter() - t0}
     return table, ""
 

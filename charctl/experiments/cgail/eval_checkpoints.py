@@ -1,56 +1,52 @@
-"""Evaluate every kept checkpoint of a cgail run (train.keep_checkpoint_every) and pick one.
+"""`charctl eval RUN --checkpoints` for cgail: every kept checkpoint (train.keep_checkpoint_every) against
+the ten-skill targets, and the rule that picks one (the loop, the choice and its confirmation on fresh
+starts: charctl/commands/eval_checkpoints.py).
 
-    .venv/bin/python scripts/eval_checkpoints.py RUN_DIR [--seconds 5] [-k 64] [--confusion-k 16]
-        [--min-no-fall 0.8] [--min-diagonal 0.9] [--confirm-seed 7] [--fidelity [--fidelity-k 4]]
-        [--rank margin|fidelity]
+    charctl eval RUN --checkpoints [--survival 5] [-k 64] [--confusion-k 16] [--min-no-fall 0.8]
+        [--min-diagonal 0.9] [--seed 4321] [--confirm-seed 7] [--after N] [--fidelity] [--fidelity-k 4]
+        [--rank fidelity|margin] [-o DIR] [device=cpu|cuda]
 
 For each checkpoints/samples_<n>.pt (and last.pt) it runs what `charctl eval RUN --checkpoint F
---survival SECONDS -k K` and `--confusion -k CK` run, into RUN/eval/<checkpoint>/, then writes
+--survival SECONDS -k K` and `--confusion -k CK` run, into OUT/<checkpoint>/ (OUT: -o, default RUN/eval/),
+then writes
 
-- RUN/eval/checkpoints.json and checkpoints.md: per checkpoint, every skill's no-fall share and
+- OUT/checkpoints.json and checkpoints.md: per checkpoint, every skill's no-fall share and
   Fig 6.8 diagonal (mean classifier probability of the commanded skill on the policy's motion),
   the worst of each, and whether both targets hold;
-- RUN/eval/checkpoints.png: worst no-fall and lowest diagonal against samples, with the targets.
+- OUT/checkpoints.png: worst no-fall and lowest diagonal against samples, with the targets.
 
-With `--fidelity` each checkpoint also gets what `charctl eval RUN --checkpoint F --fidelity -k FK`
-measures (docs/cgail.md, "Fidelity": pose coverage, DTW body-position error and the signature per
-skill, without the filmstrips; the chosen checkpoint's re-evaluation draws them): the table gains
-the lowest coverage over the skills and a coverage per skill, the plot a line.
+With fidelity (`--fidelity`, or the default `--rank fidelity`) each checkpoint also gets what
+`charctl eval RUN --checkpoint F --fidelity -k FK` measures (docs/cgail.md, "Fidelity": pose coverage,
+DTW body-position error and the signature per skill, without the filmstrips; the chosen checkpoint's
+re-evaluation draws them): the table gains the lowest coverage over the skills and a coverage per
+skill, the plot a line.
 
-Selection (`--rank margin`, the default): the checkpoint that meets both targets with the largest
-margin (the smaller of worst no-fall - min_no_fall and min diagonal - min_diagonal), else the one
-closest to meeting them. `--rank fidelity` (implies `--fidelity`): the largest lowest-coverage over
-the skills, ties broken by the worst no-fall, then the lowest diagonal. Picking
-the best of many noisy estimates favours a lucky one, so the chosen checkpoint is evaluated again on
-fresh starts (`--confirm-seed`, a different seed from the selection's); both results are reported.
-Each checkpoint's result is kept in RUN/eval/<checkpoint>/row.json: run the script again while the
-training goes on and only the new checkpoints are evaluated (last.pt again when it has moved on).
+Selection: `--rank fidelity` (the default; implies `--fidelity`): the largest lowest-coverage over the
+skills, ties broken by the worst no-fall, then the lowest diagonal. `--rank margin`: the checkpoint
+that meets both targets with the largest margin (the smaller of worst no-fall - min_no_fall and min
+diagonal - min_diagonal), else the one closest to meeting them. Each checkpoint's result is kept in
+OUT/<checkpoint>/row.json and reused while its settings match. Policies run on the CPU unless a
+`device=` override says otherwise.
 """
 
 from __future__ import annotations
 
-import argparse
 import json
+from dataclasses import dataclass
 from pathlib import Path
 
-import torch
+from charctl.errors import CharctlError
 
-
-def kept_checkpoints(run_dir: Path) -> list[tuple[int, str]]:
-    """(samples, file name) of RUN/checkpoints/samples_*.pt and last.pt, by sample count."""
-    from charctl.checkpoints import KEPT_CHECKPOINT, load_checkpoint
-
-    found = []
-    for p in sorted((run_dir / "checkpoints").glob("samples_*.pt")):
-        m = KEPT_CHECKPOINT.fullmatch(p.name)
-        if m:
-            found.append((int(m.group(1)), p.name))
-    last = run_dir / "checkpoints" / "last.pt"
-    if last.is_file():
-        n = int(load_checkpoint(last, "cgail")["samples"])
-        if all(n != s for s, _ in found):
-            found.append((n, "last.pt"))
-    return sorted(found)
+RANKS = ("fidelity", "margin")  # --rank; the first is the default (the fidelity metric, where cgail has it)
+SECONDS = 5.0  # no-fall episode length without --survival
+EPISODES = 64  # no-fall episodes per skill without -k
+CONFUSION_EPISODES = 16
+FIDELITY_EPISODES = 4
+MIN_NO_FALL = 0.8
+MIN_DIAGONAL = 0.9
+SEED = 4321
+CONFIRM_SEED = 7
+OTHER_MODES = ("dtw", "confusion", "switch", "curves")  # modes --checkpoints does not combine with
 
 
 def margin(worst_no_fall: float, min_diagonal: float, min_no_fall: float, min_diag: float) -> float:
@@ -66,8 +62,8 @@ def rank_key(row: dict, rank: str) -> tuple:
 
 
 def cached_row(out: Path, name: str, samples: int, seconds: float, k: int, ck: int, seed: int) -> dict | None:
-    """The row written by an earlier run of this script with the same settings (re-runs evaluate only
-    new checkpoints), or None."""
+    """The row written by an earlier evaluation with the same settings (re-runs evaluate only new
+    checkpoints), or None."""
     path = out / "row.json"
     if not path.is_file():
         return None
@@ -89,6 +85,7 @@ def evaluate_checkpoint(
     out: Path,
     fidelity_k: int = 0,
     filmstrips: bool = False,
+    device: str = "cpu",
 ) -> dict:
     """No-fall and Fig 6.8 diagonal per skill of one checkpoint, and with `fidelity_k` > 0 its fidelity
     over that many episodes per skill (each part reused from out/row.json when its settings match)."""
@@ -99,14 +96,14 @@ def evaluate_checkpoint(
     tr = None
     if row is None:
         out.mkdir(parents=True, exist_ok=True)
-        tr = load_eval_run(run_dir, "cpu", name)
+        tr = load_eval_run(run_dir, device, name)
         row = survival_and_confusion(tr, name, seconds, k, ck, seed, out)
         atomic_write_text(out / "row.json", strict_json(row))
     wanted = {"k": fidelity_k, "seed": seed}
     if fidelity_k > 0 and (row.get("fidelity") or {}).get("settings") != wanted:
         from charctl.experiments.cgail.fidelity import eval_fidelity
 
-        tr = tr or load_eval_run(run_dir, "cpu", name)
+        tr = tr or load_eval_run(run_dir, device, name)
         res = eval_fidelity([tr], fidelity_k, out, seed=seed, filmstrips=filmstrips)["skills"]
         peak = {s: max(r["policy"]["right_foot_peak"], r["policy"]["left_foot_peak"]) for s, r in res.items()}
         clip_peak = {
@@ -150,12 +147,12 @@ def survival_and_confusion(tr, name: str, seconds: float, k: int, ck: int, seed:
     return row
 
 
-def write_report(run_dir: Path, rows: list[dict], chosen: dict | None, confirm: dict | None, a) -> None:
-    from charctl.files import atomic_write_text, strict_json
+def write_report(run_dir: Path, rows: list[dict], chosen: dict | None, confirm: dict | None, a) -> str:
+    """checkpoints.md and checkpoints.png in `a.out` (`a`: the settings, a `CgailCheckpoints`); returns the table."""
+    from charctl.files import atomic_write_text
     from charctl.viz.plots import new_figure, save_figure
 
-    out = run_dir / "eval"
-    atomic_write_text(out / "checkpoints.json", strict_json({"rows": rows, "chosen": chosen, "confirm": confirm}))
+    out = a.out
     skills = list(rows[0]["no_fall"])
     fid = bool(a.fidelity)
     lines = [
@@ -221,76 +218,102 @@ def write_report(run_dir: Path, rows: list[dict], chosen: dict | None, confirm: 
     ax.legend(loc="lower right")
     ax.set_title(f"{run_dir.name}: kept checkpoints against the targets (dotted)")
     save_figure(fig, out / "checkpoints.png")
-    print("\n".join(lines))
+    return "\n".join(lines)
 
 
-def main() -> None:
-    from charctl.errors import CharctlError
+# ---------------------------------------------------------------------------- the command's side
+@dataclass
+class CgailCheckpoints:
+    """The settings of one `charctl eval RUN --checkpoints` (a `charctl.experiments.CheckpointEvaluation`)."""
 
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("run_dir", type=Path)
-    ap.add_argument("--seconds", type=float, default=5.0, help="episode length of the no-fall test (s)")
-    ap.add_argument("-k", type=int, default=64, help="episodes per skill for no-fall")
-    ap.add_argument("--confusion-k", type=int, default=16, help="episodes per skill for the Fig 6.8 diagonal")
-    ap.add_argument("--min-no-fall", type=float, default=0.8)
-    ap.add_argument("--min-diagonal", type=float, default=0.9)
-    ap.add_argument("--seed", type=int, default=4321, help="starts of the selection evaluation")
-    ap.add_argument("--confirm-seed", type=int, default=7, help="fresh starts for the chosen checkpoint")
-    ap.add_argument("--after", type=float, default=0.0, help="skip checkpoints before this many samples")
-    ap.add_argument(
-        "--fidelity", action="store_true", help="also evaluate fidelity (coverage, body error) per checkpoint"
-    )
-    ap.add_argument("--fidelity-k", type=int, default=4, help="episodes per skill for --fidelity")
-    ap.add_argument(
-        "--rank",
-        choices=("margin", "fidelity"),
-        default="margin",
-        help="selection rule: margin on no-fall / diagonal, or lowest coverage then no-fall (implies --fidelity)",
-    )
-    a = ap.parse_args()
-    torch.set_num_threads(2)
-    try:
-        for flag, value in (("-k", a.k), ("--confusion-k", a.confusion_k), ("--fidelity-k", a.fidelity_k)):
-            if value < 1:
-                raise CharctlError(f"{flag} must be >= 1, got {value}")
-        a.fidelity = a.fidelity or a.rank == "fidelity"
-        fidelity_k = a.fidelity_k if a.fidelity else 0
-        found = [(n, f) for n, f in kept_checkpoints(a.run_dir) if n >= a.after]
-        if not found:
-            raise CharctlError(f"{a.run_dir}/checkpoints has no checkpoint to evaluate")
-        rows = []
-        for n, name in found:
-            print(f"--- {name} ({n:,} samples)", flush=True)
-            row = evaluate_checkpoint(
-                a.run_dir,
-                name,
-                n,
-                a.seconds,
-                a.k,
-                a.confusion_k,
-                a.seed,
-                a.run_dir / "eval" / Path(name).stem,
-                fidelity_k=fidelity_k,
-            )
-            row["margin"] = margin(row["worst_no_fall"], row["min_diagonal"], a.min_no_fall, a.min_diagonal)
-            rows.append(row)
-        chosen = max(rows, key=lambda r: rank_key(r, a.rank))  # the first (fewest samples) of equals
-        confirm = evaluate_checkpoint(
-            a.run_dir,
-            chosen["checkpoint"],
-            chosen["samples"],
-            a.seconds,
-            a.k,
-            a.confusion_k,
-            a.confirm_seed,
-            a.run_dir / "eval" / f"{Path(chosen['checkpoint']).stem}_confirm",
-            fidelity_k=fidelity_k,
-            filmstrips=True,
+    run_dir: Path
+    out: Path
+    device: str
+    seconds: float
+    k: int
+    confusion_k: int
+    fidelity: bool
+    fidelity_k: int
+    min_no_fall: float
+    min_diagonal: float
+    rank: str
+    seed: int
+    confirm_seed: int
+
+    def evaluate(self, name: str, samples: int, out: Path, seed: int, confirm: bool = False) -> dict:
+        row = evaluate_checkpoint(
+            self.run_dir,
+            name,
+            samples,
+            self.seconds,
+            self.k,
+            self.confusion_k,
+            seed,
+            out,
+            fidelity_k=self.fidelity_k if self.fidelity else 0,
+            filmstrips=confirm,
+            device=self.device,
         )
-        write_report(a.run_dir, rows, chosen, confirm, a)
-    except CharctlError as exc:
-        raise SystemExit(f"error: {exc}") from None
+        if not confirm:
+            row["margin"] = margin(row["worst_no_fall"], row["min_diagonal"], self.min_no_fall, self.min_diagonal)
+        return row
+
+    def rank_key(self, row: dict) -> tuple:
+        return rank_key(row, self.rank)
+
+    def write_report(self, rows: list[dict], chosen: dict, confirm: dict) -> str:
+        return write_report(self.run_dir, rows, chosen, confirm, self)
 
 
-if __name__ == "__main__":
-    main()
+def checkpoints(targets: list[str], options: dict, overrides: list[str]) -> CgailCheckpoints:
+    """The `checkpoints` entry point: the settings of `--checkpoints`, every argument checked (one run, a
+    conditional one, no other mode but --survival / --fidelity, a known --rank, a machine that can draw the
+    confirmation's filmstrips when fidelity is measured) before anything is written."""
+    from charctl.experiments.cgail.evaluate import split_eval_overrides
+    from charctl.experiments.cgail.policy import resolve_run_dirs
+    from charctl.runs import read_run_config, run_experiment
+
+    device, overrides = split_eval_overrides(overrides)
+    run_dirs = resolve_run_dirs(targets, overrides, "eval")
+    if len(run_dirs) != 1:
+        raise CharctlError(f"--checkpoints evaluates the kept checkpoints of one run, got {len(run_dirs)}")
+    (run_dir,) = run_dirs
+    if run_experiment(run_dir) != "cgail":
+        raise CharctlError(f"{run_dir} is a {run_experiment(run_dir)!r} run, not a cgail run")
+    other = [m for m in OTHER_MODES if options.get(m)]
+    if other:
+        raise CharctlError(
+            f"--checkpoints measures no-fall (--survival SECONDS), the Fig 6.8 diagonal and fidelity (--fidelity) "
+            f"per checkpoint; it does not combine with --{other[0]}"
+        )
+    if options.get("checkpoint"):
+        raise CharctlError("--checkpoints evaluates every kept checkpoint; --checkpoint names one (give either)")
+    if not bool((read_run_config(run_dir).get("cgail") or {}).get("conditional", True)):
+        raise CharctlError(f"{run_dir} is an AMP (unconditional) run: it has no classifier for the Fig 6.8 diagonal")
+    rank = options.get("rank") or RANKS[0]
+    if rank not in RANKS:
+        raise CharctlError(f"--rank takes {' or '.join(RANKS)}, got {rank!r}")
+    fidelity = bool(options.get("fidelity")) or rank == "fidelity"
+    if fidelity:
+        from charctl.experiments.cgail.fidelity import check_can_render
+
+        check_can_render()  # the chosen checkpoint's filmstrips
+
+    def pick(name: str, default):
+        return default if options.get(name) is None else options[name]
+
+    return CgailCheckpoints(
+        run_dir=run_dir,
+        out=Path(options.get("out") or run_dir / "eval"),
+        device=device or "cpu",
+        seconds=float(pick("survival", SECONDS)),
+        k=int(pick("episodes", EPISODES)),
+        confusion_k=int(pick("confusion_k", CONFUSION_EPISODES)),
+        fidelity=fidelity,
+        fidelity_k=int(pick("fidelity_k", FIDELITY_EPISODES)),
+        min_no_fall=float(pick("min_no_fall", MIN_NO_FALL)),
+        min_diagonal=float(pick("min_diagonal", MIN_DIAGONAL)),
+        rank=rank,
+        seed=int(pick("seed", SEED)),
+        confirm_seed=int(pick("confirm_seed", CONFIRM_SEED)),
+    )

@@ -1,0 +1,167 @@
+"""Metrics of `charctl eval` for cgail (charctl/experiments/cgail/evaluate.py), computed from the rollouts
+of rollouts.py: DTW pose error against the clips (Table 6.1), no-fall share and classifier accuracy,
+the Fig 6.8 confusion matrices, and the switch study's latency, falls and whether the new skill is done.
+"""
+
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+
+from charctl.eval.dtw import dtw_align
+from charctl.eval.pose import pose_error_matrix
+from charctl.experiments.cgail.policy import TrainedRun
+from charctl.experiments.cgail.rollouts import DeviceRun, SwitchRecording, rollout_skill, survival_rollout
+from charctl.experiments.cgail.skills import DemoPairs
+
+# Table 6.1 of the paper: per-motion mean per-frame pose error after DTW (AMP, cGAIL).
+PAPER_TABLE_6_1 = {
+    "walk": (2.462, 1.456),
+    "run": (2.162, 0.808),
+    "jump": (2.984, 1.781),
+    "breakdance": (2.984, 2.233),
+    "spindance": (1.397, 1.051),
+    "uppercut": (1.307, 0.659),
+    "left_punch": (1.125, 1.412),
+    "right_punch": (0.881, 1.145),
+    "right_kick": (1.942, 1.367),
+    "left_kick": (2.301, 1.672),
+}
+
+
+def skill_reference(tr: TrainedRun, skill: int, frames: int) -> np.ndarray:
+    """(m, 15, 4) reference local rotations covering `frames` frames (looping clips tiled)."""
+    ref = tr.agent.skills[skill]
+    rot = ref.local_rot
+    if ref.loop and frames > len(rot):
+        reps = int(np.ceil(frames / (len(rot) - 1)))
+        rot = np.concatenate([rot[:-1]] * reps + [rot[-1:]])[:frames]
+    return rot
+
+
+def dtw_pose_error(rollout_rot: np.ndarray, reference_rot: np.ndarray) -> float:
+    """Mean per-frame e_pose along the DTW alignment (12 clip joints; root excluded)."""
+    from charctl.motion.skeleton import load_skeleton
+
+    joints = load_skeleton().clip_joint_bodies
+    cost = pose_error_matrix(rollout_rot[:, joints], reference_rot[:, joints])
+    i, j, total = dtw_align(cost)
+    return float(cost[i, j].mean())
+
+
+# ---------------------------------------------------------------------------- per mode
+def dtw_table(runs: list[DeviceRun], episodes: int) -> dict[str, dict[str, float]]:
+    """Table 6.1: per skill of the first run, each run's mean DTW pose error and falls, the paper's values."""
+    skills = runs[0].skill_names
+    table: dict[str, dict[str, float]] = {}
+    for s in skills:
+        table[s] = {}
+        for tr in runs:
+            if s not in tr.skill_names:
+                continue
+            k = tr.skill_index(s)
+            seconds = max(2.0, min(5.0, 2 * len(tr.agent.skills[k].local_rot) / tr.cfg.env.control_hz))
+            ro = rollout_skill(tr, k, episodes, seconds, seed=1234)
+            errs = [dtw_pose_error(r, skill_reference(tr, k, len(r))) for r in ro.local_rot if len(r) > 2]
+            table[s][tr.label] = float(np.mean(errs)) if errs else float("nan")
+            table[s][f"{tr.label} falls"] = ro.falls
+        if s in PAPER_TABLE_6_1:
+            table[s]["paper AMP"], table[s]["paper cGAIL"] = PAPER_TABLE_6_1[s]
+    return table
+
+
+def survival_table(runs: list[DeviceRun], episodes: int, seconds: float, seed: int) -> dict[str, dict[str, float]]:
+    """Per skill, each run's no-fall share (and classifier accuracy on its motion) over `episodes` episodes."""
+    table: dict[str, dict[str, float]] = {}
+    for tr in runs:
+        for k, s in enumerate(tr.skill_names):
+            r = survival_rollout(tr, k, episodes, seconds, seed=seed)
+            row = table.setdefault(s, {})
+            row[f"{tr.label} no-fall"] = r["no_fall"]
+            if "class_acc_policy" in r:
+                row[f"{tr.label} class acc"] = r["class_acc_policy"]
+    return table
+
+
+def confusion_matrices(tr: DeviceRun, episodes: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """Fig 6.8: (policy, data) (K, K) mean classifier probabilities per commanded skill (the policy's
+    3-s episodes from frame 0) and per clip label (the demonstration pairs)."""
+    K = len(tr.skill_names)
+    policy = np.zeros((K, K))
+    for k in range(K):
+        ro = rollout_skill(tr, k, episodes, 3.0, seed=seed)
+        policy[k] = ro.probs.mean(0)
+    data = np.zeros((K, K))
+    with torch.no_grad():
+        for k, p in enumerate(DemoPairs(tr.agent.skills).pairs):  # the demonstration pairs of each clip
+            _, logits = tr.discriminate_for(p, k)
+            data[k] = F.softmax(logits, -1).mean(0).cpu().numpy()
+    return policy, data
+
+
+PERFORM_SECONDS = 3.0  # the window after a switch in which the new skill must be seen done (issue 24)
+PERFORM_SHARE = 0.8  # done = the higher foot reaches this share of the clip's highest foot, without a fall
+
+
+def performed_after_switch(
+    tr: TrainedRun, kb: int, pos: np.ndarray, rot: np.ndarray, alive_hist: np.ndarray, t_switch: int
+) -> dict:
+    """Whether skill `kb` is seen done in the `PERFORM_SECONDS` after a switch to it: per trial the higher
+    foot's peak height (m) over the frames before any fall, against the clip's. `pos` / `rot` (F, N, 15, ...)
+    world bodies of the F frames after the switch; `alive_hist` (T, N) alive before each step."""
+    from charctl.eval.fidelity import signature
+    from charctl.experiments.cgail.fidelity import clip_reference
+
+    ref = clip_reference(tr.agent.skills[kb])
+    clip_sig = signature(ref.body_pos, ref.body_rot, ref.dt, ref.ground)
+    clip_peak = max(clip_sig["right_foot_peak"], clip_sig["left_foot_peak"])
+    alive_after = alive_hist[t_switch : t_switch + len(pos)].T  # (N, F)
+    lengths = np.where(alive_after.all(axis=1), alive_after.shape[1], alive_after.argmin(axis=1))
+    sig = signature(pos.swapaxes(0, 1), rot.swapaxes(0, 1), 1.0 / tr.cfg.env.control_hz, lengths=np.maximum(lengths, 1))
+    peak = np.maximum(sig["right_foot_peak"], sig["left_foot_peak"])
+    ok = (peak >= PERFORM_SHARE * clip_peak) & alive_after.all(axis=1)
+    return {
+        "foot_peak": peak.tolist(),
+        "foot_peak_mean": float(peak.mean()),
+        "clip_foot_peak": float(clip_peak),
+        "performed": int(ok.sum()),
+    }
+
+
+def switch_summary(tr: TrainedRun, kb: int, rec: SwitchRecording, t_switch: int, ramp: int, trials: int) -> dict:
+    """One condition of the switch study: latency until P(B) > 0.5 per trial alive at the switch, falls,
+    and whether B is seen done (`performed_after_switch`)."""
+    live = rec.alive_hist
+    pb = rec.probs[t_switch:, :, kb]
+    up = live[t_switch:]  # alive before the step: frames after a fall (and its reset) do not count
+    latency = []
+    for i in np.flatnonzero(rec.alive_at_switch):
+        hit = (pb[:, i] > 0.5) & up[:, i]
+        latency.append(int(np.argmax(hit)) if hit.any() else None)
+    lat_ok = [x for x in latency if x is not None]
+    falls = int((~rec.alive).sum())
+    return {
+        **performed_after_switch(tr, kb, rec.pos_after, rec.rot_after, rec.alive_hist, t_switch),
+        "ramp_frames": ramp,
+        "alive_at_switch": int(rec.alive_at_switch.sum()),
+        "latency_frames_mean": float(np.mean(lat_ok)) if lat_ok else None,
+        "latency_frames": latency,
+        "never_switched": int(sum(x is None for x in latency)),
+        "falls": falls,
+        "trials": trials,
+    }
+
+
+def switch_curves(rec: SwitchRecording) -> dict[str, np.ndarray]:
+    """Class probabilities (T, K), r_S and r_C (T,) per frame, averaged over the trials alive before the step."""
+    live = rec.alive_hist
+    with np.errstate(all="ignore"), warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+
+        def mean(x: np.ndarray) -> np.ndarray:
+            return np.nanmean(np.where(live[..., None] if x.ndim == 3 else live, x, np.nan), axis=1)
+
+        return {"probs": mean(rec.probs), "r_style": mean(rec.r_style), "r_class": mean(rec.r_class)}

@@ -1,0 +1,211 @@
+"""Rollouts of `charctl eval` for cgail (charctl/experiments/cgail/evaluate.py): a trained run whose policy
+and discriminator sit on a torch device, and the episodes each evaluation mode records with it.
+
+Policy and discriminator inference runs on the torch device of `device` (each run's config, or a
+`device=cpu|cuda|auto` override on the command line); the simulator stays on the host, and only
+actions, probabilities and rewards come back from the device. What is computed from the recordings is
+in metrics.py, what is written in report.py.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+
+from charctl.errors import CharctlError
+from charctl.experiments.cgail.discriminator import blended_class_reward, style_reward
+from charctl.experiments.cgail.policy import TrainedRun, load_trained_run, local_joint_rotations
+
+EVAL_OVERRIDES = ("output_root", "device")  # the only key=value overrides `charctl eval cgail` takes
+
+
+@dataclass
+class SkillRollout:
+    """Per-episode recordings of one commanded skill."""
+
+    local_rot: list[np.ndarray]  # each (n_i, 15, 4) until the first fall
+    probs: np.ndarray | None  # (n_total, K) classifier probabilities over all recorded pairs
+    r_style: np.ndarray  # (n_total,)
+    falls: int
+
+
+@dataclass
+class DeviceRun(TrainedRun):
+    """A trained run whose policy and discriminator live on torch `device` (loaded on the CPU with
+    `weights_only=True`, then moved). Inputs go to the device, results come back as numpy."""
+
+    device: str = "cpu"
+
+    @torch.no_grad()
+    def mean_action(self, env) -> np.ndarray:
+        """(N, 28) mean actions (PD targets, the policy's action units) as float64 on the host."""
+        dev = self.device
+        obs = torch.as_tensor(env.state, dtype=torch.float32, device=dev)
+        cond = torch.as_tensor(env.command_blend(), dtype=torch.float32, device=dev) if self.agent.conditional else None
+        return self.agent.model.mean_action(obs, cond).cpu().numpy().astype(np.float64)
+
+    @torch.no_grad()
+    def discriminate(self, pairs: np.ndarray, cond: np.ndarray) -> tuple[torch.Tensor, torch.Tensor | None]:
+        """Discriminator score d (B,) and class logits (B, K) (None for AMP) of (B, 266) (o_t, o_t+1)
+        pairs whose command blend was `cond` (B, K) (read by a per-skill style head), computed and left
+        on the device."""
+        dev = self.device
+        c = torch.as_tensor(cond, dtype=torch.float32, device=dev)
+        return self.agent.disc(torch.as_tensor(pairs, dtype=torch.float32, device=dev), cond=c)
+
+    def discriminate_for(self, pairs: np.ndarray, skill: int) -> tuple[torch.Tensor, torch.Tensor | None]:
+        """`discriminate` for pairs all commanded with `skill`."""
+        return self.discriminate(pairs, np.eye(len(self.agent.skills))[np.full(len(pairs), skill)])
+
+
+def split_eval_overrides(overrides: list[str]) -> tuple[str | None, list[str]]:
+    """(the `device=` override resolved to a torch device, or None; the other overrides). Anything
+    but output_root= / device=, a bad device name or an absent CUDA device is a one-line error, raised
+    before any run is loaded."""
+    other = [o for o in overrides if o.split("=", 1)[0] not in EVAL_OVERRIDES]
+    if other:
+        raise CharctlError(f"cgail eval takes only output_root=... and device=... overrides (got {' '.join(other)})")
+    devices = [o.split("=", 1)[1] for o in overrides if o.split("=", 1)[0] == "device"]
+    rest = [o for o in overrides if o.split("=", 1)[0] != "device"]
+    return (eval_device(devices[-1]) if devices else None), rest
+
+
+def eval_device(name: str) -> str:
+    """The torch device `name` (auto | cpu | cuda | cuda:N) stands for: auto -> cuda when available,
+    else cpu; a bad name or a missing CUDA device is a one-line CharctlError."""
+    from charctl.config import resolve_device
+
+    return resolve_device(str(name))
+
+
+def load_eval_run(run_dir: str | Path, device: str | None = None, checkpoint: str | None = None) -> DeviceRun:
+    """The run's agent with its policy and discriminator on torch `device` (None: the run's configured
+    `device`, resolved). The checkpoint is read with `torch.load(weights_only=True,
+    map_location="cpu")`: its random-number states must stay CPU ByteTensors for
+    `torch.set_rng_state`; only the two inference networks move to the device."""
+    tr = load_trained_run(run_dir, checkpoint)
+    dev = device if device is not None else eval_device(str(tr.cfg.get("device", "auto")))
+    tr.agent.model.to(dev)
+    tr.agent.disc.to(dev)
+    return DeviceRun(tr.run_dir, tr.cfg, tr.agent, device=dev)
+
+
+@torch.no_grad()
+def rollout_skill(tr: DeviceRun, skill: int, episodes: int, seconds: float, seed: int = 0) -> SkillRollout:
+    """`episodes` envs commanded with `skill` (mean actions, RSI at frame 0, no switching)."""
+    env = tr.make_env(episodes, seed=seed, switch_prob=0.0, episode_seconds=seconds + 1.0)
+    env.forced_command = np.full(episodes, skill)
+    env.start_frame = 0
+    env.random_yaw = False
+    env.reset(np.arange(episodes))
+    steps = int(round(seconds * env.cfg.control_hz))
+    alive = np.ones(episodes, dtype=bool)
+    rots = [[local_joint_rotations(env)[i]] for i in range(episodes)]
+    pairs, falls = [], 0
+    for _ in range(steps):
+        o_t = env.obs.copy()
+        res = env.step(tr.mean_action(env))
+        rec = alive.copy()
+        pairs.append(np.concatenate([o_t, res.pair_next], axis=1)[rec])
+        fell = res.terminated & alive
+        falls += int(fell.sum())
+        alive &= ~res.terminated
+        cur = local_joint_rotations(env)
+        for i in np.flatnonzero(alive):
+            rots[i].append(cur[i])
+        if not alive.any():
+            break
+    d, logits = tr.discriminate_for(np.concatenate(pairs), skill)
+
+    probs = F.softmax(logits, -1).cpu().numpy() if logits is not None else None
+    r_style = style_reward(d, tr.agent.cfg.disc.objective).cpu().numpy()
+    return SkillRollout([np.array(r) for r in rots], probs, r_style, falls)
+
+
+@torch.no_grad()
+def survival_rollout(tr: DeviceRun, skill: int, episodes: int, seconds: float, seed: int = 0) -> dict:
+    """`episodes` envs held on `skill` for `seconds` (mean actions, RSI at random clip frames and
+    random headings, no command switches). Returns the fraction that never fell and, for cGAIL,
+    the classifier's accuracy on the policy's pairs up to each env's first fall."""
+    env = tr.make_env(episodes, seed=seed, switch_prob=0.0, episode_seconds=seconds + 1.0)
+    env.forced_command = np.full(episodes, skill)
+    env.reset(np.arange(episodes))
+    alive = np.ones(episodes, dtype=bool)
+    hits, total = torch.zeros((), dtype=torch.long, device=tr.device), 0  # hits stay on the device until the end
+    for _ in range(int(round(seconds * env.cfg.control_hz))):
+        o_t = env.obs.copy()
+        res = env.step(tr.mean_action(env))
+        if tr.agent.conditional:
+            _, logits = tr.discriminate_for(np.concatenate([o_t, res.pair_next], axis=1)[alive], skill)
+            hits += (logits.argmax(-1) == skill).sum()
+            total += int(alive.sum())
+        alive &= ~res.terminated
+    out = {"episodes": episodes, "seconds": seconds, "no_fall": float(alive.mean())}
+    if tr.agent.conditional:
+        out["class_acc_policy"] = int(hits) / max(total, 1)
+    return out
+
+
+@dataclass
+class SwitchRecording:
+    """The trials of one condition of the switch study (command A, then B at frame `t_switch`), T frames."""
+
+    probs: np.ndarray  # (T, N, K) classifier probabilities of each step's pair
+    r_style: np.ndarray  # (T, N)
+    r_class: np.ndarray  # (T, N) control reward of the blended command
+    alive_hist: np.ndarray  # (T, N) alive before each step
+    alive: np.ndarray  # (N,) alive at the end
+    alive_at_switch: np.ndarray  # (N,) alive when the command switched
+    pos_after: np.ndarray  # (F, N, 15, 3) world bodies of the F frames after the switch (PERFORM window)
+    rot_after: np.ndarray  # (F, N, 15, 4)
+
+
+@torch.no_grad()
+def switch_rollout(
+    tr: DeviceRun, ka: int, kb: int, trials: int, ramp: int, t_switch: int, t_end: int, perform_frames: int
+) -> SwitchRecording:
+    """`trials` envs commanded with skill `ka`, switched to `kb` at frame `t_switch` (over `ramp` frames,
+    0: at once), recorded until frame `t_end`; bodies kept for the `perform_frames` after the switch."""
+    hz = tr.cfg.env.control_hz
+    episode_seconds = t_end / hz + 1.0
+    env = tr.make_env(trials, seed=7, switch_prob=0.0, ramp_frames=ramp, episode_seconds=episode_seconds)
+    env.forced_command = np.full(trials, ka)
+    env.start_frame = 0
+    env.random_yaw = False
+    env.reset(np.arange(trials))
+    probs, rs, rc, alive_hist, pos_after, rot_after = [], [], [], [], [], []
+    alive = np.ones(trials, dtype=bool)
+    for t in range(t_end):
+        if t == t_switch:
+            env.set_command(np.arange(trials), kb, ramp=ramp > 0)
+            env.forced_command = np.full(trials, kb)
+            alive_at_switch = alive.copy()
+        o_t = env.obs.copy()
+        cmd_a, cmd_b, w, blend = env.prev_cmd.copy(), env.cmd.copy(), env.w.copy(), env.command_blend()
+        res = env.step(tr.mean_action(env))
+        d, logits = tr.discriminate(np.concatenate([o_t, res.pair_next], axis=1), blend)
+        p = F.softmax(logits, -1)
+        r_c = blended_class_reward(
+            p,
+            torch.from_numpy(cmd_a).to(tr.device),
+            torch.from_numpy(cmd_b).to(tr.device),
+            torch.from_numpy(w).float().to(tr.device),
+            len(tr.skill_names),
+            tr.cfg.reward.class_form,
+        )
+        probs.append(p)  # device tensors; to the host once, after the episode
+        rs.append(style_reward(d, tr.agent.cfg.disc.objective))
+        rc.append(r_c)
+        alive_hist.append(alive.copy())
+        alive &= ~res.terminated
+        if t_switch <= t < t_switch + perform_frames:  # bodies after the step, for the peaks
+            pos_after.append(env.sim.body_pos.copy())
+            rot_after.append(env.sim.body_quat_xyzw.copy())
+    probs, rs, rc = (torch.stack(x).cpu().numpy() for x in (probs, rs, rc))
+    return SwitchRecording(
+        probs, rs, rc, np.array(alive_hist), alive, alive_at_switch, np.array(pos_after), np.array(rot_after)
+    )

@@ -1,0 +1,142 @@
+"""Every `charctl eval` and `charctl export` mode checks all its arguments before it writes anything.
+
+One case per mode (each experiment's eval modes, its export outputs, and the clip exports): a bad
+argument of that mode gives exit 2, exactly one `error:` line naming it, no traceback, and nothing on
+disk: the output folder the command was pointed at stays absent, and nothing appears in the sandbox
+(output_root, a new run directory) or in the run directories it read. Several cases are the ones that
+used to fail only after a first file was written: an unknown sweep case (config.yaml in -o), a second
+hopper-ga run without a checkpoint (the first run's figures), the web demo of a tracking run (the ONNX
+file), --fps on a BVH-folder skeleton (a new run directory), a missing --checkpoint with --curves.
+
+The commands run in this process (`charctl_main`: the console script's error handling without an
+interpreter start per case); shipped policies from pretrained/ are read, never written.
+"""
+
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+
+import pytest
+
+from conftest import REPO, assert_one_line_error
+
+PRETRAINED = REPO / "pretrained"
+
+# (id, arguments, words the error line must contain). Placeholders: {out} the folder the command writes to
+# (must stay absent), {tmp} the sandbox, {cgail} / {amp} / {tracking} shipped cgail / AMP / tracking policies,
+# {srb} / {com} / {hopper} smoke runs, {hopper_bare} a copy of the hopper-ga run without its checkpoint,
+# {mocap} a folder with one BVH file.
+MODES = [
+    # eval: cgail
+    ("eval-cgail-dtw", "eval {cgail} --dtw -k 1 --checkpoint nosuch.pt -o {out}", ["nosuch.pt"]),
+    ("eval-cgail-confusion", "eval {amp} --confusion -k 1 -o {out}", ["--confusion", "conditional"]),
+    ("eval-cgail-switch", "eval {cgail} --switch walk nosuch -k 1 -o {out}", ["nosuch"]),
+    ("eval-cgail-curves", "eval {cgail} --curves --checkpoint nosuch.pt -o {out}", ["nosuch.pt"]),
+    ("eval-cgail-survival", "eval {cgail} --survival 1 --switch walk nosuch -k 1 -o {out}", ["nosuch"]),
+    ("eval-cgail-fidelity", "eval {cgail} --fidelity -k 1 -o {out} device=tpu", ["tpu"]),
+    ("eval-cgail-checkpoints", "eval {cgail} --checkpoints --rank nosuch -o {out}", ["--rank", "nosuch"]),
+    # eval: the other experiments
+    ("eval-srb-push", "eval {srb} --push -k 1 -o {out} push.baseline_run={tmp}/nosuch", ["nosuch"]),
+    ("eval-com-cnn-pose-error", "eval {com} --pose-error -o {out} data.test_clips=[]", ["held-out"]),
+    ("eval-com-cnn-dtw", "eval {com} --dtw -o {out} nosuch.key=1", ["nosuch"]),
+    (
+        "eval-mm-sweep",
+        "eval motion-matching --sweep scale=smoke sweep.cases=[99] output_root={tmp}/runs -o {out}",
+        ["sweep.cases", "99"],
+    ),
+    ("eval-hopper-curves", "eval {hopper} {hopper_bare} --curves -o {out}", ["no checkpoint"]),
+    # export: clips
+    ("export-clip-bvh", "export bvh nosuch_clip -o {out}/w.bvh", ["nosuch_clip"]),
+    ("export-clip-video", "export video walk --fps 0 -o {out}/w.mp4", ["--fps"]),
+    # export: cgail
+    ("export-cgail-onnx", "export {cgail} --onnx {out}/p.onnx --commands walk:0,nosuch:1", ["nosuch"]),
+    ("export-cgail-torchscript", "export {cgail} --torchscript {out}/p.pt --checkpoint nosuch.pt", ["nosuch.pt"]),
+    ("export-cgail-bvh", "export {cgail} --bvh {out}/r.bvh --commands walk:-1", ["-1", "--commands"]),
+    ("export-cgail-video", "export {cgail} --video {out}/r.mp4 --seconds 0", ["--seconds"]),
+    ("export-cgail-web", "export {tracking} --onnx {out}/p.onnx --web {out}/site", ["tracking run"]),
+    # export: the other experiments
+    ("export-srb-video", "export {srb} --video {out}/v.mp4 --seconds -2", ["--seconds"]),
+    ("export-com-cnn-bvh", "export {com} --bvh {out}/g.bvh --com-path nosuch", ["nosuch"]),
+    ("export-com-cnn-video", "export {com} --video {out}/g.mp4 --crouch-at -1", ["--crouch-at"]),
+    (
+        "export-mm-bvh",
+        "export motion-matching scale=smoke output_root={tmp}/runs data.bvh_dir={mocap} --bvh {out}/x.bvh --fps 30",
+        ["--fps", "data.bvh_dir"],
+    ),
+    (
+        "export-mm-video",
+        "export motion-matching scale=smoke output_root={tmp}/runs path=nosuch --video {out}/x.mp4",
+        ["nosuch"],
+    ),
+    ("export-hopper-bvh", "export {hopper} --bvh {out}/h.bvh --seconds 0", ["--seconds"]),
+    ("export-hopper-video", "export {hopper} --video {out}/h.mp4 --fps -5", ["--fps"]),
+]
+
+
+def snapshot(*roots: Path) -> set[str]:
+    out: set[str] = set()
+    for root in roots:
+        if root.exists():
+            out |= {str(p) for p in root.rglob("*")}
+    return out
+
+
+@pytest.fixture(scope="module")
+def runs(smoke_run, tmp_path_factory) -> dict[str, Path]:
+    """The run directories the cases read (smoke runs of srb, com-cnn and hopper-ga; shipped cgail policies)."""
+    root = tmp_path_factory.mktemp("mode-args")
+    hopper = smoke_run("hopper-ga")
+    bare = Path(shutil.copytree(hopper, root / "hopper-ga" / "bare"))
+    (bare / "checkpoints" / "last.pt").unlink()
+    mocap = root / "mocap"
+    from charctl.motion.bvh import write_bvh
+    from charctl.motion.library import load_clip
+
+    write_bvh(load_clip("walk"), mocap / "walk.bvh")
+    return {
+        "cgail": PRETRAINED / "cgail-3skill",
+        "amp": PRETRAINED / "amp-walk",
+        "tracking": PRETRAINED / "tracking-walk",
+        "srb": smoke_run("srb"),
+        "com": smoke_run("com-cnn"),
+        "hopper": hopper,
+        "hopper_bare": bare,
+        "mocap": mocap,
+    }
+
+
+def test_every_mode_has_a_case():
+    """Each eval mode option and each export output of every experiment has its case above."""
+    from charctl.experiments import EXPERIMENTS, load
+
+    short = {"cgail": "cgail", "srb": "srb", "com-cnn": "com-cnn", "motion-matching": "mm", "hopper-ga": "hopper"}
+    ids = {case[0] for case in MODES}
+    outputs = ("onnx", "torchscript", "bvh", "video", "web")
+    for name in EXPERIMENTS:
+        exp = load(name)
+        for o in exp.eval_options:
+            if o.mode:
+                assert f"eval-{short[name]}-{o.flag[2:]}" in ids, (name, o.flag)
+        for o in exp.export_options:
+            if o.name in outputs:
+                assert f"export-{short[name]}-{o.flag[2:]}" in ids, (name, o.flag)
+    assert {"export-clip-bvh", "export-clip-video"} <= ids
+
+
+@pytest.mark.parametrize("case", MODES, ids=[c[0] for c in MODES])
+def test_a_bad_argument_writes_nothing(case, runs, tmp_path, charctl_main, monkeypatch):
+    name, template, words = case
+    if name == "export-cgail-web":  # the web demo's npm packages need not be installed for its arguments' check
+        import charctl.experiments.cgail.web_site as web_site
+
+        monkeypatch.setattr(web_site, "check_web_sources", lambda *a, **k: None)
+    out = tmp_path / "out"
+    values = {"out": out, "tmp": tmp_path, **runs}
+    watched = [tmp_path] + [p for key, p in runs.items() if "{" + key + "}" in template]
+    before = snapshot(*watched)
+    res = charctl_main(*[a.format(**values) for a in template.split()])
+    assert res.returncode == 2, f"exit {res.returncode}:\n{res.stdout}\n{res.stderr}"
+    assert_one_line_error(res, *[w.format(**values) for w in words])
+    assert not out.exists(), f"{out} was made: {sorted(snapshot(out))}"
+    assert sorted(snapshot(*watched) - before) == []
