@@ -46,7 +46,7 @@ CGAIL_FID_RECIPE := disc.style_head=per_skill disc.wrong_skill_fakes=0.25 cgail.
 CGAIL_FID_SAMPLES ?= 40000000
 
 .PHONY: repro-cgail-fidelity
-repro-cgail-fidelity: install ## cgail: the fidelity recipe's runs A, B, C and D (3 skills; ~5.5 h on 2 cores), fidelity of every kept checkpoint
+repro-cgail-fidelity: install ## cgail: the fidelity recipe's runs A to E (3 skills, 8e7 samples; ~7 h on 2 cores) = pretrained/cgail-3skill-fidelity, with its evaluations
 	$(CHARCTL) train cgail scale=small $(CGAIL_FID_RECIPE) train.total_samples=5005312 output_root=$(CGAIL_FID)/A
 	A=$$(ls -d $(CGAIL_FID)/A/cgail/*/ | tail -1); B=$(CGAIL_FID)/B/cgail/$$(basename $$A); \
 	mkdir -p $$B/checkpoints && cp $$A/config.yaml $$B/ && cp $$A/checkpoints/last.pt $$B/checkpoints/last.pt && \
@@ -56,7 +56,10 @@ repro-cgail-fidelity: install ## cgail: the fidelity recipe's runs A, B, C and D
 	$(CHARCTL) train cgail --resume $$C reward.pose_error_threshold=0.5 train.total_samples=$(CGAIL_FID_SAMPLES) && \
 	$(CHARCTL) eval $$B --checkpoints --rank fidelity && $(CHARCTL) eval $$C --checkpoints --rank fidelity && \
 	D=$(CGAIL_FID)/D/cgail/$$(basename $$A); mkdir -p $$D/checkpoints && cp -r $$C/config.yaml $$C/tb $$D/ && cp $$C/checkpoints/last.pt $$D/checkpoints/ && \
-	$(CHARCTL) train cgail --resume $$D reward.w_track=0.5 train.total_samples=46579712 && $(CHARCTL) eval $$D --fidelity --survival 5 -k 4
+	$(CHARCTL) train cgail --resume $$D reward.w_track=0.5 train.total_samples=46579712 && $(CHARCTL) eval $$D --fidelity --survival 5 -k 4 && \
+	E=$(CGAIL_FID)/E/cgail/$$(basename $$A); mkdir -p $$E/checkpoints && cp -r $$D/config.yaml $$D/tb $$E/ && cp $$D/checkpoints/last.pt $$E/checkpoints/ && \
+	$(CHARCTL) train cgail --resume $$E env.skill_fall_weight=0.5 reward.w_track=1.0 train.total_samples=80000000 && \
+	$(CHARCTL) eval $$E --fidelity -k 4 && $(CHARCTL) eval $$E --survival 5 -k 32 && $(CHARCTL) eval $$E --dtw --confusion --switch walk right_kick -k 8
 
 .PHONY: repro-cgail-tracking-3skill
 repro-cgail-tracking-3skill: install ## cgail: the multi-skill tracking baseline (walk, run, right_kick; command and phase in the state), the fidelity anchor; not yet trained to the end here
