@@ -132,8 +132,12 @@ class TrainConfig:
     momentum: float = 0.9  # SGD momentum (paper silent)
     weight_decay: float = 0.0  # L2 weight decay of the optimiser (paper silent)
     grad_clip: float = 10.0  # global gradient-norm clip (0 = off)
+    log_every: int = 20  # steps between the training-loss scalars in TensorBoard (and the last step's)
     eval_every: int = 500  # steps between held-out losses in TensorBoard
     checkpoint_every: int = 1000  # steps between checkpoints (and one at the end / on Ctrl-C)
+    # training windows (samples) between checkpoints also kept as checkpoints/samples_<n>.pt beside last.pt;
+    # 0 = only last.pt
+    keep_checkpoint_every: int = field(default=0, metadata={"ge": 0})
     torch_threads: int = 2  # torch intra-op threads
 
 
