@@ -76,6 +76,27 @@ def test_resume_from_a_checkpoint_continues_the_same_trajectory(tmp_path):
     np.testing.assert_array_equal(resumed.best_genome, straight.best_genome)
 
 
+def test_training_on_the_shared_runner_resumes_the_same_trajectory(tmp_path):
+    """`train` (the GA learner on charctl.rl.runner): 2 generations, then --resume to 4, evolves exactly what
+    `evolve` does in one go; iterations count generations and samples count evaluations."""
+    from charctl.experiments.hopper_ga.train import train
+    from charctl.runs import Run
+
+    cfg2, cfg4 = (small_cfg(**{"ga.generations": g, "limp.cycles": 2}) for g in (2, 4))
+    train(cfg2, Run(dir=tmp_path, experiment="hopper-ga", cfg=cfg2))
+    resumed = Run(dir=tmp_path, experiment="hopper-ga", cfg=cfg4, resumed=True)
+    train(cfg4, resumed)
+    resumed.close()
+    straight = run_ga(cfg4)
+    metrics = json.loads((tmp_path / "metrics.json").read_text())
+    assert metrics["generations_done"] == metrics["iterations"] == 4 and metrics["finished"]
+    # the resume re-evaluates the checkpoint's population once (12 individuals) to rebuild its metrics
+    assert metrics["samples"] == metrics["evaluations"] == straight.evaluations + 12
+    assert metrics["best_eval"] == straight.best_fitness
+    genes = json.loads((tmp_path / "best_genome.json").read_text())["genes"]
+    np.testing.assert_array_equal(np.array(list(genes.values())), straight.best_genome)
+
+
 def test_cli_train_with_ray_export_and_report(tmp_path):
     out = tmp_path / "runs"
     res = run_charctl(

@@ -1,16 +1,22 @@
-"""The on-policy training loop's plumbing, shared by every PPO experiment (cgail, srb).
+"""The training loop's plumbing, shared by every experiment that trains in iterations: the PPO
+experiments (cgail, srb: one iteration = rollout + updates), com-cnn (one iteration = one minibatch
+step of the supervised CNN) and hopper-ga (one iteration = one generation of the GA).
 
-An experiment supplies a *learner*: an object that knows how to run one iteration (rollout +
-updates) and how to save and restore itself. The runner owns everything around it, the same
-way for every experiment (the rsl_rl pattern: a runner owns the loop, the algorithm is small):
+An experiment supplies a *learner*: an object that knows how to run one iteration and how to save
+and restore itself. The runner owns everything around it, the same way for every experiment (the
+rsl_rl pattern: a runner owns the loop, the algorithm is small):
 
 - resume from the run's last checkpoint (shape-checked by the learner's signature);
 - stop signals: the first Ctrl-C / SIGTERM finishes the iteration, writes the checkpoint and ends
   the run with `Interrupted` (exit 130 / 143 at the CLI);
-- a progress bar over samples with the learner's chosen live statistics;
-- TensorBoard scalars every `log_every` iterations, periodic and final checkpoints;
+- a budget in samples (`total_samples`) or in iterations (`total_iterations`), and a progress bar
+  over samples (or iterations, `bar_unit`) with the learner's chosen live statistics;
+- TensorBoard scalars (at the sample count) every `log_every` iterations, periodic and final
+  checkpoints, and checkpoints kept every `keep_every` samples;
 - divergence: a non-finite statistic or parameter stops the run *without* overwriting the last
-  (finite) checkpoint, and raises a one-line error;
+  (finite) checkpoint, writes `{"diverged": true, ...}` metrics and raises a one-line error;
+- the simulator's blow-up rate (`sim/blowup_rate`, a warning when it stays high), for learners that
+  step a simulator (`track_blowups`);
 - final metrics with the same keys for every experiment (`iterations`, `samples`, `wall_s`,
   `samples_per_s`, then the learner's own);
 - torch's global random states in every checkpoint (`torch_rng`, and `cuda_rng` when CUDA is in
@@ -32,14 +38,19 @@ from charctl.guard import BlowupMonitor, check_finite, check_policy_step
 
 
 class Learner(Protocol):
-    """What an experiment plugs into `run_on_policy`."""
+    """What an experiment plugs into `run_on_policy`. The runner advances `iteration` (by one) and
+    `samples` (by `samples_per_iteration`) after each `iterate()`."""
 
     iteration: int  # completed iterations
-    samples: int  # environment steps consumed so far
+    samples: int  # samples consumed so far: environment steps, training examples, GA evaluations
+    # samples consumed by the last iterate(), read right after it: constant for PPO and com-cnn, the
+    # generation's evaluations for hopper-ga
     samples_per_iteration: int
 
     def iterate(self) -> dict[str, float]:
-        """One iteration (rollout + updates); returns scalars keyed by their TensorBoard names."""
+        """One iteration; returns the scalars to log for it, keyed by their TensorBoard names (every one
+        is checked for NaN / inf; a learner may return only some on some iterations, e.g. com-cnn's
+        held-out loss every train.eval_every steps)."""
 
     def state_dict(self) -> dict:
         """Everything a checkpoint holds (tensors, numbers, strings, lists, dicts only)."""
@@ -50,13 +61,14 @@ class Learner(Protocol):
         """Shapes that must match for a checkpoint to load (network widths, skill names ...)."""
 
     def modules(self) -> list[torch.nn.Module]:
-        """Networks whose parameters must stay finite."""
+        """Networks whose parameters must stay finite (none for a GA)."""
 
     def progress_fields(self, stats: dict[str, float]) -> dict[str, float]:
         """The few statistics shown on the progress bar."""
 
     def summary(self, stats: dict[str, float]) -> dict:
-        """Experiment-specific final metrics from the last iteration's statistics."""
+        """Experiment-specific final metrics from the last iteration's statistics (also on a stop: the
+        place for outputs an interrupted run should still leave, e.g. hopper-ga's figures)."""
 
 
 class AgentCounters:
@@ -84,15 +96,55 @@ class AgentCounters:
 
 @dataclass(frozen=True)
 class RunnerSettings:
-    """Loop settings (from the experiment's `train` config section)."""
+    """Loop settings (from the experiment's `train` config section). The budget is `total_samples`
+    (cgail, srb) or `total_iterations` (com-cnn's steps, hopper-ga's generations): exactly one > 0."""
 
-    total_samples: int
+    total_samples: int = 0  # train until this many samples (cgail, srb) ...
+    total_iterations: int = 0  # ... or until this many iterations (com-cnn: train.steps, hopper-ga: ga.generations)
+    budget_key: str = "train.total_samples"  # the config key of the budget, named when a resume already reached it
+    iteration_name: str = "iteration"  # what an iteration is called in messages ("interrupted at step 12")
+    # "samples": the progress bar counts samples (with an iteration budget, the remaining iterations at the
+    # current samples_per_iteration); another word (hopper-ga: "gen") counts iterations under that name
+    bar_unit: str = "samples"
     checkpoint_every: int = 10  # iterations
     keep_every: int = 0  # samples between checkpoints kept as checkpoints/samples_<n>.pt (0 = only last.pt)
     log_every: int = 1  # iterations
     description: str = "training"
+    track_blowups: bool = True  # the learner steps a simulator: sim/blowup_rate and its warning
     blowup_threshold: float = 0.01  # simulator resets per sample above which a sustained rate is warned
     blowup_window: int = 10  # iterations the rate must stay above the threshold
+
+    def __post_init__(self) -> None:
+        if (self.total_samples > 0) == (self.total_iterations > 0):
+            raise ValueError("RunnerSettings needs exactly one of total_samples and total_iterations > 0")
+        if self.bar_unit != "samples" and not self.by_iterations:
+            raise ValueError("a progress bar over iterations needs an iteration budget (total_iterations)")
+
+    @property
+    def by_iterations(self) -> bool:
+        return self.total_iterations > 0
+
+    @property
+    def total(self) -> int:
+        return int(self.total_iterations if self.by_iterations else self.total_samples)
+
+    def done(self, learner: Learner) -> int:
+        """How much of the budget `learner` has used, in the budget's unit."""
+        return learner.iteration if self.by_iterations else learner.samples
+
+    def bar(self, learner: Learner) -> tuple[int, int]:
+        """(total, done) of the progress bar, in `bar_unit`."""
+        if self.bar_unit != "samples":
+            return self.total_iterations, learner.iteration
+        if self.by_iterations:
+            remaining = self.total_iterations - learner.iteration
+            return learner.samples + remaining * learner.samples_per_iteration, learner.samples
+        return self.total_samples, learner.samples
+
+    def at(self, learner: Learner) -> str:
+        """ "iteration 12" (a sample budget) or "step 12/3000" (an iteration budget)."""
+        total = f"/{self.total_iterations}" if self.by_iterations else ""
+        return f"{self.iteration_name} {learner.iteration}{total}"
 
 
 # ---------------------------------------------------------------------------- random states
@@ -141,10 +193,10 @@ def restore_rng_states(state: dict) -> str | None:
     return None
 
 
-def _stop_if_diverged(learner: Learner, run, stats: dict[str, float]) -> None:
+def _stop_if_diverged(learner: Learner, run, stats: dict[str, float], name: str = "iteration") -> None:
     """Raise `Diverged` (before any checkpoint of this iteration is written) on a NaN/inf."""
     try:
-        where = f"iteration {learner.iteration}"
+        where = f"{name} {learner.iteration}"
         check_finite(stats, *learner.modules(), where=where, checkpoint=run.checkpoint_path)
         check_policy_step(stats, where=where, checkpoint=run.checkpoint_path)
     except CharctlError as exc:
@@ -162,7 +214,8 @@ def crossed_multiple(samples: int, step: int, every: int) -> bool:
 
 
 def run_on_policy(learner: Learner, run, settings: RunnerSettings) -> dict:
-    """Train `learner` until `settings.total_samples`, writing into `run` (charctl.runs.Run)."""
+    """Train `learner` until its budget (`settings.total_samples` or `total_iterations`), writing into
+    `run` (charctl.runs.Run)."""
     from charctl.checkpoints import kept_checkpoint_name
     from charctl.progress import TrainingProgress
     from charctl.signals import StopFlag
@@ -173,23 +226,26 @@ def run_on_policy(learner: Learner, run, settings: RunnerSettings) -> dict:
         note = restore_rng_states(state)
         if note:
             print(note, flush=True)
-    total = int(settings.total_samples)
-    if learner.samples >= total:
-        raise CharctlError(
-            f"{run.dir} already reached train.total_samples={total}; raise it to continue (train.total_samples=...)"
-        )
-    samples_at_start, stats = learner.samples, {}
+    total = settings.total
+    if settings.done(learner) >= total:
+        key = settings.budget_key
+        raise CharctlError(f"{run.dir} already reached {key}={total}; raise it to continue ({key}=...)")
+    samples_at_start, iterations_at_start, stats = learner.samples, learner.iteration, {}
     blowups = BlowupMonitor(settings.blowup_threshold, settings.blowup_window)
+    bar_total, bar_done = settings.bar(learner)
     t_start = time.perf_counter()
-    with StopFlag() as stop, TrainingProgress(total, settings.description) as bar:
-        bar.resume_at(learner.samples)
-        while learner.samples < total:
+    with StopFlag() as stop, TrainingProgress(bar_total, settings.description, unit=settings.bar_unit) as bar:
+        bar.resume_at(bar_done)
+        while settings.done(learner) < total:
             stats = learner.iterate()
+            step = learner.samples_per_iteration  # read after iterate(): a GA's generations differ
             learner.iteration += 1
-            learner.samples += learner.samples_per_iteration
-            _stop_if_diverged(learner, run, stats)
-            warning = blowups.update(stats.get("sim/unstable_resets", 0.0), learner.samples_per_iteration)
-            stats["sim/blowup_rate"] = blowups.rate
+            learner.samples += step
+            _stop_if_diverged(learner, run, stats, settings.iteration_name)
+            warning = None
+            if settings.track_blowups:
+                warning = blowups.update(stats.get("sim/unstable_resets", 0.0), step)
+                stats["sim/blowup_rate"] = blowups.rate
             if warning:
                 print(f"\n{warning}", flush=True)
             if learner.iteration % settings.log_every == 0:
@@ -197,9 +253,9 @@ def run_on_policy(learner: Learner, run, settings: RunnerSettings) -> dict:
             fields = learner.progress_fields(stats)
             if blowups.active:
                 fields["BLOWUPS"] = f"{100 * blowups.rate:.1f}%"
-            bar.update(learner.samples_per_iteration, **fields)
+            bar.update(step if settings.bar_unit == "samples" else 1, **fields)
             names = ["last.pt"] if learner.iteration % settings.checkpoint_every == 0 or stop.requested else []
-            if crossed_multiple(learner.samples, learner.samples_per_iteration, settings.keep_every):
+            if crossed_multiple(learner.samples, step, settings.keep_every):
                 names.append(kept_checkpoint_name(learner.samples))
             if names:
                 state = with_rng_states(learner.state_dict())  # built once for both files
@@ -209,10 +265,10 @@ def run_on_policy(learner: Learner, run, settings: RunnerSettings) -> dict:
                 break
     if stop.requested:
         # metrics.json describes the run as it stands (replacing e.g. a diverged entry of an earlier segment)
-        summary = learner.summary(stats) if stats else {}
+        summary = learner.summary(stats) if learner.iteration > iterations_at_start else {}
         run.write_metrics({"interrupted": True, "iterations": learner.iteration, "samples": learner.samples, **summary})
         run.close()
-        message = f"interrupted at iteration {learner.iteration}: checkpoint written; continue with --resume {run.dir}"
+        message = f"interrupted at {settings.at(learner)}: checkpoint written; continue with --resume {run.dir}"
         raise stop.interrupted(message)
     run.save_checkpoint(with_rng_states(learner.state_dict()), learner.signature())
     wall = time.perf_counter() - t_start

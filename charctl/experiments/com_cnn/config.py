@@ -135,8 +135,13 @@ class TrainConfig:
     momentum: float = ranged(0.9, ge=0)  # SGD momentum (paper silent)
     weight_decay: float = ranged(0.0, ge=0)  # L2 weight decay of the optimiser (paper silent)
     grad_clip: float = ranged(10.0, ge=0)  # global gradient-norm clip (0 = off)
+    # steps between the training-loss scalars in TensorBoard (and the last step's)
+    log_every: int = ranged(20, ge=1)
     eval_every: int = ranged(500, ge=1)  # steps between held-out losses in TensorBoard
     checkpoint_every: int = ranged(1000, ge=1)  # steps between checkpoints (and one at the end / on Ctrl-C)
+    # training windows (samples) between checkpoints also kept as checkpoints/samples_<n>.pt beside last.pt;
+    # 0 = only last.pt
+    keep_checkpoint_every: int = ranged(0, ge=0)
     torch_threads: int = ranged(2, ge=1)  # torch intra-op threads
 
 

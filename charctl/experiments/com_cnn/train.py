@@ -113,123 +113,132 @@ def teacher_forced(model: ComCNN, source: BatchSource) -> tuple[np.ndarray, np.n
     return np.concatenate(preds), np.concatenate(targets), loss_sum / max(len(source), 1)
 
 
-def train(cfg, run) -> dict:
-    """Train one network into `run` (resumable) and write metrics.json."""
-    import torch
+class ComCnnLearner:
+    """Minibatch SGD on the CNN for the shared runner (charctl.rl.runner): one iteration = one minibatch
+    step, `samples` = training windows seen. The checkpoint keeps its layout ("step" = `iteration`)."""
 
-    from charctl.guard import diverged, first_non_finite
-    from charctl.progress import TrainingProgress
-    from charctl.signals import StopFlag
+    def __init__(self, cfg, run):
+        import torch
 
-    torch.set_num_threads(int(cfg.train.torch_threads))
-    torch.manual_seed(int(cfg.seed))
-    device = pick_device(str(cfg.device))
-    t_data = time.perf_counter()
-    train_w, test_w, body = build_windows(cfg)
-    source = BatchSource(train_w, device, int(cfg.data.window_cache_mb))
-    test_source = BatchSource(test_w, device, int(cfg.data.window_cache_mb)) if len(test_w) else None
-    data_s = time.perf_counter() - t_data
-    model = build_model(cfg, body.pose_dim).to(device)
-    model.set_normalizer(normalizer_stats(source))
-    opt = make_optimizer(model.parameters(), cfg.train)
-    signature = model_signature(cfg, body.pose_dim)
-    step, wall, ema = 0, 0.0, None
-    if run.resumed and run.has_checkpoint():
-        state = run.load_checkpoint(signature)
-        model.load_state_dict(state["model"])
-        opt.load_state_dict(state["optimizer"])
-        step, wall, ema = int(state["step"]), float(state["train_wall_s"]), state.get("loss_ema")
-        print(f"resumed at step {step}")
-    steps, batch = int(cfg.train.steps), int(cfg.train.batch_size)
+        torch.set_num_threads(int(cfg.train.torch_threads))
+        torch.manual_seed(int(cfg.seed))
+        self.cfg, self.run = cfg, run
+        self.device = pick_device(str(cfg.device))
+        t_data = time.perf_counter()
+        self.train_w, self.test_w, self.body = build_windows(cfg)
+        cache = int(cfg.data.window_cache_mb)
+        self.source = BatchSource(self.train_w, self.device, cache)
+        self.test_source = BatchSource(self.test_w, self.device, cache) if len(self.test_w) else None
+        self.data_s = time.perf_counter() - t_data
+        self.model = build_model(cfg, self.body.pose_dim).to(self.device)
+        self.model.set_normalizer(normalizer_stats(self.source))
+        self.opt = make_optimizer(self.model.parameters(), cfg.train)
+        self.iteration = 0  # minibatch steps done
+        self.samples = 0
+        self.samples_per_iteration = int(cfg.train.batch_size)
+        self.wall = 0.0  # seconds spent in the steps themselves, over every session of the run
+        self.ema: float | None = None  # exponential moving average of the training loss (progress bar, metrics)
+        self.test_metrics: dict = {}
 
-    def save() -> None:
-        bad = first_non_finite({"train/loss_ema": ema}, model)
-        if bad:  # never overwrite the last finite checkpoint with a diverged network
-            stop_diverged(bad)
-        run.save_checkpoint(
-            {
-                "model": model.state_dict(),
-                "optimizer": opt.state_dict(),
-                "step": step,
-                "train_wall_s": wall,
-                "loss_ema": ema,
-                "pose_dim": body.pose_dim,
-            },
-            signature,
+    def signature(self) -> dict:
+        return model_signature(self.cfg, self.body.pose_dim)
+
+    def modules(self) -> list:
+        return [self.model]
+
+    def state_dict(self) -> dict:
+        return {
+            "model": self.model.state_dict(),
+            "optimizer": self.opt.state_dict(),
+            "step": self.iteration,
+            "samples": self.samples,
+            "train_wall_s": self.wall,
+            "loss_ema": self.ema,
+            "pose_dim": self.body.pose_dim,
+        }
+
+    def load_state_dict(self, state: dict) -> None:
+        self.model.load_state_dict(state["model"])
+        self.opt.load_state_dict(state["optimizer"])
+        self.iteration = int(state["step"])
+        self.samples = int(state.get("samples", self.iteration * self.samples_per_iteration))
+        self.wall, self.ema = float(state["train_wall_s"]), state.get("loss_ema")
+
+    def iterate(self) -> dict[str, float]:
+        """One minibatch step; the scalars of train.log_every steps, test/* every train.eval_every steps
+        and the last step's, and the loss whenever it is not finite (the runner stops the run then)."""
+        import torch
+
+        tc, model = self.cfg.train, self.model
+        t0 = time.perf_counter()
+        idx = np.random.default_rng([int(self.cfg.seed), self.iteration]).integers(
+            0, len(self.source), size=self.samples_per_iteration
         )
-
-    def stop_diverged(what: str) -> None:
-        run.log_scalars({"train/diverged": 1.0}, step * batch)
-        run.write_metrics(
-            {
-                "diverged": True,
-                "diverged_at_step": step,
-                "diverged_on": what,
-                "step": step,
-                "samples": step * batch,
-                "train_loss_ema": ema,
-                "wall_s": wall,
-                "device": device,
+        hist, com, target = self.source.batch(idx)
+        h, c = model.normalize_inputs(hist, com)
+        loss = ((model.forward_normalized(h, c) - model.normalize_pose(target)) ** 2).mean()
+        self.opt.zero_grad(set_to_none=True)
+        loss.backward()
+        if tc.grad_clip > 0:
+            torch.nn.utils.clip_grad_norm_(model.parameters(), float(tc.grad_clip))
+        self.opt.step()
+        self.wall += time.perf_counter() - t0
+        step, samples = self.iteration + 1, self.samples + self.samples_per_iteration  # after this step
+        lv = float(loss.detach())
+        if not np.isfinite(lv):  # the update that produced this loss has already been applied: stop here
+            return {"train/loss": lv}
+        self.ema = lv if self.ema is None else 0.98 * self.ema + 0.02 * lv
+        last = step == int(tc.steps)
+        stats = {}
+        if step % int(tc.log_every) == 0 or last:
+            stats = {
+                "train/loss": lv,
+                "train/loss_ema": self.ema,
+                "train/samples_per_s": samples / max(self.wall, 1e-9),
             }
-        )
-        raise diverged(what, where=f"step {step}", checkpoint=run.checkpoint_path)
+        if self.test_source is not None and (step % int(tc.eval_every) == 0 or last):
+            self.test_metrics = evaluate_test(model, self.test_source, self.body)
+            stats.update({f"test/{k}": v for k, v in self.test_metrics.items()})
+        return stats
 
-    test_metrics: dict = {}
-    with StopFlag() as stop, TrainingProgress(steps * batch, "com-cnn", unit="samples") as bar:
-        bar.update(step * batch)
-        while step < steps:
-            t0 = time.perf_counter()
-            idx = np.random.default_rng([int(cfg.seed), step]).integers(0, len(source), size=batch)
-            hist, com, target = source.batch(idx)
-            h, c = model.normalize_inputs(hist, com)
-            loss = ((model.forward_normalized(h, c) - model.normalize_pose(target)) ** 2).mean()
-            opt.zero_grad(set_to_none=True)
-            loss.backward()
-            if cfg.train.grad_clip > 0:
-                torch.nn.utils.clip_grad_norm_(model.parameters(), float(cfg.train.grad_clip))
-            opt.step()
-            wall += time.perf_counter() - t0
-            step += 1
-            lv = float(loss.detach())
-            if not np.isfinite(lv):  # the update that produced this loss has already been applied: stop here
-                stop_diverged(f"train/loss = {lv}")
-            ema = lv if ema is None else 0.98 * ema + 0.02 * lv
-            if step % 20 == 0 or step == steps:
-                run.log_scalars(
-                    {"train/loss": lv, "train/loss_ema": ema, "train/samples_per_s": step * batch / max(wall, 1e-9)},
-                    step * batch,
-                )
-            if test_source is not None and (step % int(cfg.train.eval_every) == 0 or step == steps):
-                test_metrics = evaluate_test(model, test_source, body)
-                run.log_scalars({f"test/{k}": v for k, v in test_metrics.items()}, step * batch)
-            bar.update(batch, loss=ema, **({"test_deg": test_metrics["joint_angle_deg"]} if test_metrics else {}))
-            if step % int(cfg.train.checkpoint_every) == 0 or stop.requested:
-                save()
-            if stop.requested:
-                raise stop.interrupted(
-                    f"interrupted at step {step} ({step * batch} samples): checkpoint written; "
-                    f"continue with --resume {run.dir}"
-                )
-    save()
-    metrics = {
-        "step": step,
-        "samples": step * batch,
-        "train_loss_ema": ema,
-        **{f"test_{k}": v for k, v in test_metrics.items()},
-        "wall_s": wall,
-        "samples_per_s": step * batch / max(wall, 1e-9),
-        "data_build_s": data_s,
-        "train_windows": len(train_w),
-        "test_windows": len(test_w),
-        "pose_dim": body.pose_dim,
-        "z_dim": model.z_dim,
-        "parameters": sum(p.numel() for p in model.parameters()),
-        "device": device,
-        "train_clips": sorted({s.base for s in train_w.seqs}),
-        "test_clips": sorted({s.base for s in test_w.seqs}),
-    }
-    run.write_metrics(metrics)
-    return metrics
+    def progress_fields(self, stats: dict[str, float]) -> dict[str, float]:  # noqa: ARG002
+        test = {"test_deg": self.test_metrics["joint_angle_deg"]} if self.test_metrics else {}
+        return {"loss": self.ema, **test}
+
+    def summary(self, stats: dict[str, float]) -> dict:  # noqa: ARG002
+        train_w, test_w = self.train_w, self.test_w
+        return {
+            "step": self.iteration,
+            "train_loss_ema": self.ema,
+            **{f"test_{k}": v for k, v in self.test_metrics.items()},
+            "train_wall_s": self.wall,
+            "data_build_s": self.data_s,
+            "train_windows": len(train_w),
+            "test_windows": len(test_w),
+            "pose_dim": self.body.pose_dim,
+            "z_dim": self.model.z_dim,
+            "parameters": sum(p.numel() for p in self.model.parameters()),
+            "device": self.device,
+            "train_clips": sorted({s.base for s in train_w.seqs}),
+            "test_clips": sorted({s.base for s in test_w.seqs}),
+        }
+
+
+def train(cfg, run) -> dict:
+    """Train one network into `run` with the shared runner (resumable) and write metrics.json."""
+    from charctl.rl.runner import RunnerSettings, run_on_policy
+
+    tc = cfg.train
+    settings = RunnerSettings(
+        total_iterations=int(tc.steps),
+        budget_key="train.steps",
+        iteration_name="step",
+        checkpoint_every=int(tc.checkpoint_every),
+        keep_every=int(tc.keep_checkpoint_every),
+        description="com-cnn",
+        track_blowups=False,
+    )
+    return run_on_policy(ComCnnLearner(cfg, run), run, settings)
 
 
 def evaluate_test(model: ComCNN, source: BatchSource, body: BodyModel) -> dict:

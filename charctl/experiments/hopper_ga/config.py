@@ -123,6 +123,15 @@ class GAConfig:
 
 
 @dataclass
+class TrainConfig:
+    """Checkpoints of the GA run (the shared runner, charctl.rl.runner; one iteration = one generation)."""
+
+    checkpoint_every: int = ranged(1, ge=1)  # generations between checkpoints/last.pt (and one at the end / on Ctrl-C)
+    # evaluations between checkpoints also kept as checkpoints/samples_<n>.pt beside last.pt; 0 = only last.pt
+    keep_checkpoint_every: int = ranged(0, ge=0)
+
+
+@dataclass
 class RuntimeConfig:
     # local (vectorised numpy) | process (multiprocessing pool) | ray
     kind: Annotated[str, Literal["local", "process", "ray"]] = "local"
@@ -156,6 +165,7 @@ class Config(BaseConfig):
     bounds: BoundsConfig = field(default_factory=BoundsConfig)
     fitness: FitnessConfig = field(default_factory=FitnessConfig)
     ga: GAConfig = field(default_factory=GAConfig)
+    train: TrainConfig = field(default_factory=TrainConfig)
     runtime: RuntimeConfig = field(default_factory=RuntimeConfig)
     limp: LimpConfig = field(default_factory=LimpConfig)
     export: ExportConfig = field(default_factory=ExportConfig)

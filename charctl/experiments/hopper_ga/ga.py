@@ -82,47 +82,66 @@ class GAState:
         )
 
 
-def evolve(
-    ga_cfg,
-    seed: int,
-    low: np.ndarray,
-    high: np.ndarray,
-    evaluate: Callable[[np.ndarray], dict],
-    state: GAState | None = None,
-    on_generation: Callable[[GAState, dict], None] | None = None,
-    should_stop: Callable[[], bool] | None = None,
-) -> GAState:
-    """Run (or continue) the GA up to ga_cfg.generations; `on_generation(state, best_metrics)` is
-    called after generation 0 and after every generation (checkpointing, logging)."""
-    algorithms, base, tools, Individual = _deap()
-    N, G = int(ga_cfg.population), len(low)
-    lo, hi = [float(v) for v in low], [float(v) for v in high]
-    toolbox = base.Toolbox()
-    toolbox.register("mate", tools.cxSimulatedBinaryBounded, eta=float(ga_cfg.cx_eta), low=lo, up=hi)
-    toolbox.register(
-        "mutate", tools.mutPolynomialBounded, eta=float(ga_cfg.mut_eta), low=lo, up=hi, indpb=float(ga_cfg.indpb)
-    )
-    toolbox.register("select", tools.selTournament, tournsize=int(ga_cfg.tournament))
+class GeneticAlgorithm:
+    """The GA one generation at a time: `start(state)` evaluates the initial population (generation 0)
+    or re-opens a checkpoint's, then each `step()` breeds and evaluates one generation. `state` is the
+    GAState (checkpoint) after the last call; both calls return the best individual's metrics."""
 
-    def run_eval(genomes: np.ndarray) -> dict:
+    def __init__(self, ga_cfg, seed: int, low: np.ndarray, high: np.ndarray, evaluate: Callable[[np.ndarray], dict]):
+        algorithms, base, tools, Individual = _deap()
+        self.algorithms, self.tools, self.Individual = algorithms, tools, Individual
+        self.ga_cfg, self.seed, self.evaluate = ga_cfg, int(seed), evaluate
+        self.N, self.G = int(ga_cfg.population), len(low)
+        self.lo, self.hi = [float(v) for v in low], [float(v) for v in high]
+        lo, hi = self.lo, self.hi
+        toolbox = base.Toolbox()
+        toolbox.register("mate", tools.cxSimulatedBinaryBounded, eta=float(ga_cfg.cx_eta), low=lo, up=hi)
+        toolbox.register(
+            "mutate", tools.mutPolynomialBounded, eta=float(ga_cfg.mut_eta), low=lo, up=hi, indpb=float(ga_cfg.indpb)
+        )
+        toolbox.register("select", tools.selTournament, tournsize=int(ga_cfg.tournament))
+        self.toolbox = toolbox
+        self.state: GAState | None = None
+        self.pop: list = []
+        self.metrics: dict = {}
+
+    def _eval(self, genomes: np.ndarray) -> dict:
         t0 = time.perf_counter()
-        out = evaluate(np.asarray(genomes, dtype=float))
-        st.eval_seconds += time.perf_counter() - t0
-        st.evaluations += len(genomes)
+        out = self.evaluate(np.asarray(genomes, dtype=float))
+        self.state.eval_seconds += time.perf_counter() - t0
+        self.state.evaluations += len(genomes)
         return out
 
-    if state is None:
-        random.seed(int(seed))
-        st = GAState(generation=0, population=np.zeros((N, G)), fitness=np.zeros(N), random_state=random.getstate())
-        pop = [Individual(random.uniform(a, b) for a, b in zip(lo, hi)) for _ in range(N)]
-        metrics = run_eval(np.array(pop))
+    def _random_individual(self):
+        return self.Individual(random.uniform(a, b) for a, b in zip(self.lo, self.hi))
+
+    def start(self, state: GAState | None = None) -> dict | None:
+        """Generation 0 (random, invalid individuals re-drawn), or the population of `state` (a resumed
+        run: its per-individual metrics are re-evaluated, which is deterministic). Returns the best
+        individual's metrics of generation 0, None on a resume."""
+        N, G, ga_cfg = self.N, self.G, self.ga_cfg
+        if state is not None:
+            if state.population.shape != (N, G):
+                raise CharctlError(f"checkpoint population is {state.population.shape}, this config needs ({N}, {G})")
+            self.state = state
+            random.setstate(state.random_state)
+            self.pop = [self.Individual(row.tolist()) for row in state.population]
+            self.metrics = self._eval(state.population)  # deterministic: re-creates the per-individual metrics
+            _assign(self.pop, state.fitness)
+            return None
+        random.seed(self.seed)
+        self.state = GAState(
+            generation=0, population=np.zeros((N, G)), fitness=np.zeros(N), random_state=random.getstate()
+        )
+        pop = [self._random_individual() for _ in range(N)]
+        metrics = self._eval(np.array(pop))
         for _ in range(int(ga_cfg.init_retries)):
             bad = np.flatnonzero(~metrics["valid"])
             if len(bad) == 0:
                 break
             for i in bad:
-                pop[i] = Individual(random.uniform(a, b) for a, b in zip(lo, hi))
-            redo = run_eval(np.array([pop[i] for i in bad]))
+                pop[i] = self._random_individual()
+            redo = self._eval(np.array([pop[i] for i in bad]))
             for k in metrics:
                 metrics[k][bad] = redo[k]
         if not metrics["valid"].any():
@@ -131,41 +150,47 @@ def evolve(
                 "random draws; widen the bounds (see `charctl config hopper-ga`)"
             )
         _assign(pop, metrics["fitness"])
-        _record(st, pop, metrics)
-        if on_generation:
-            on_generation(st, _best_metrics(pop, metrics))
-    else:
-        st = state
-        if st.population.shape != (N, G):
-            raise CharctlError(f"checkpoint population is {st.population.shape}, this config needs ({N}, {G})")
-        random.setstate(st.random_state)
-        pop = [Individual(row.tolist()) for row in st.population]
-        metrics = run_eval(st.population)  # deterministic: re-creates the per-individual metrics
-        _assign(pop, st.fitness)
+        self.pop, self.metrics = pop, metrics
+        _record(self.state, pop, metrics)
+        return _best_metrics(pop, metrics)
 
-    while st.generation < int(ga_cfg.generations):
-        if should_stop is not None and should_stop():
-            break
+    def step(self) -> dict:
+        """One generation: tournament selection, crossover and mutation, elitism; returns the best's metrics."""
+        ga_cfg, tools, toolbox, pop = self.ga_cfg, self.tools, self.toolbox, self.pop
         valid = [ind for ind in pop if np.isfinite(ind.fitness.values[0])]
         best = tools.selBest(valid, int(ga_cfg.elite))
         elite_rows = [_row_of(pop, e) for e in best]
         elites = [toolbox.clone(ind) for ind in best]
-        offspring = [toolbox.clone(ind) for ind in toolbox.select(valid, N - len(elites))]
-        offspring = algorithms.varAnd(offspring, toolbox, float(ga_cfg.cxpb), float(ga_cfg.mutpb))
+        offspring = [toolbox.clone(ind) for ind in toolbox.select(valid, self.N - len(elites))]
+        offspring = self.algorithms.varAnd(offspring, toolbox, float(ga_cfg.cxpb), float(ga_cfg.mutpb))
         fresh = [i for i, ind in enumerate(offspring) if not ind.fitness.valid]
-        new = run_eval(np.array([offspring[i] for i in fresh])) if fresh else None
+        new = self._eval(np.array([offspring[i] for i in fresh])) if fresh else None
         if new is not None:
             _assign([offspring[i] for i in fresh], new["fitness"])
         # per-individual metrics of the next population: elites keep theirs, unchanged offspring too
-        parents_metrics = metrics
         pop_next = elites + offspring
-        metrics = _gather_metrics(pop_next, elite_rows, offspring, fresh, new, parents_metrics, pop)
-        pop = pop_next
-        st.generation += 1
-        _record(st, pop, metrics)
-        if on_generation:
-            on_generation(st, _best_metrics(pop, metrics))
-    return st
+        self.metrics = _gather_metrics(pop_next, elite_rows, offspring, fresh, new, self.metrics, pop)
+        self.pop = pop_next
+        self.state.generation += 1
+        _record(self.state, self.pop, self.metrics)
+        return _best_metrics(self.pop, self.metrics)
+
+
+def evolve(
+    ga_cfg,
+    seed: int,
+    low: np.ndarray,
+    high: np.ndarray,
+    evaluate: Callable[[np.ndarray], dict],
+    state: GAState | None = None,
+) -> GAState:
+    """Run (or continue from `state`) the GA up to ga_cfg.generations in one go (tests, benchmarks;
+    `charctl train` steps the same GeneticAlgorithm through the shared runner, charctl.rl.runner)."""
+    ga = GeneticAlgorithm(ga_cfg, seed, low, high, evaluate)
+    ga.start(state)
+    while ga.state.generation < int(ga_cfg.generations):
+        ga.step()
+    return ga.state
 
 
 # ---------------------------------------------------------------------------- helpers
