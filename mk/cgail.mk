@@ -15,7 +15,7 @@ CGAIL_SHIPPED := $(CGAIL_300HZ) $(CGAIL_FP32) $(CGAIL_INTURN)
 
 # The policy `make demo` shows, and its command schedule (seconds): each skill held 4-5 s, so the kick
 # (a 1.5-s clip) is done after the 60-frame (2-s) command ramp ends.
-CGAIL_DEMO_POLICY := pretrained/cgail-3skill
+CGAIL_DEMO_POLICY := pretrained/cgail-3skill-fidelity
 CGAIL_DEMO_SCHEDULE := walk:0,run:4,right_kick:8
 
 .PHONY: repro-cgail-small repro-cgail-current repro-cgail-10skill repro-cgail-10skill-temperature repro-cgail-10skill-kl repro-cgail-paper demo-cgail
