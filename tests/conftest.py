@@ -75,6 +75,48 @@ def assert_one_line(exc: BaseException, *must_contain: str) -> str:
     return msg
 
 
+def charctl_in_process(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess:
+    """`charctl ARGS` through `charctl.cli.main` in this process, in `cwd` (restored after), with stdout
+    and stderr captured (also in module-scoped fixtures, which cannot take `capsys`) and rich output as
+    `cli_env` sets it for a subprocess (wide, colourless); returns a CompletedProcess with main()'s exit
+    status. An exception escaping main() - a traceback for the user - comes back as its traceback on
+    stderr with status 1, so `assert_one_line_error` names it. Use `run_charctl` where the test needs a
+    real process: signals, environment read at start-up, fault hooks."""
+    import contextlib
+    import io
+    import traceback
+
+    from charctl.cli import main
+
+    out, err = io.StringIO(), io.StringIO()
+    old_argv, old_cwd = sys.argv, os.getcwd()
+    rich_env = {"COLUMNS": "250", "NO_COLOR": "1", "TERM": "dumb"}
+    old_env = {k: os.environ.get(k) for k in rich_env}
+    os.environ.update(rich_env)
+    sys.argv = ["charctl", *args]
+    try:
+        if cwd is not None:
+            os.chdir(cwd)
+        with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+            try:
+                main()
+                code = 0
+            except SystemExit as exc:
+                code = exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 1)
+            except Exception:
+                traceback.print_exc(file=sys.stderr)
+                code = 1
+    finally:
+        sys.argv = old_argv
+        os.chdir(old_cwd)
+        for k, v in old_env.items():
+            if v is None:
+                os.environ.pop(k, None)
+            else:
+                os.environ[k] = v
+    return subprocess.CompletedProcess(["charctl", *args], code, out.getvalue(), err.getvalue())
+
+
 @pytest.fixture
 def charctl_main(capsys):
     """Call `charctl.cli.main` in this process with the given arguments (same error handling as the

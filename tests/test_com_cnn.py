@@ -11,7 +11,7 @@ import pytest
 from charctl.errors import CharctlError
 from charctl.motion import rotations as R
 
-from conftest import assert_one_line, assert_one_line_error, run_charctl
+from conftest import assert_one_line, assert_one_line_error
 
 torch = pytest.importorskip("torch")
 torch.set_num_threads(1)
@@ -392,13 +392,13 @@ def test_bvh_folder_dataset_and_generic_bvh_writer_round_trip(tmp_path):
 
 
 # ---------------------------------------------------------------------------- end to end
-def test_smoke_train_eval_export_end_to_end(tmp_path):
-    res = run_charctl("train", "com-cnn", "scale=smoke", "train.torch_threads=1", f"output_root={tmp_path}")
-    assert res.returncode == 0, res.stderr[-2000:]
-    run_dir = next((tmp_path / "com-cnn").iterdir())
+def test_smoke_train_eval_export_end_to_end(tmp_path, smoke_run_copy, charctl_main):
+    """`charctl train com-cnn scale=smoke` (the session's run through the console script, conftest.smoke_run:
+    it asserts exit 0), then `charctl eval` and `charctl export` on a copy of it, called in this process."""
+    run_dir = smoke_run_copy("com-cnn")
     assert (run_dir / "checkpoints" / "last.pt").is_file() and (run_dir / "config.yaml").is_file()
     assert any((run_dir / "tb").iterdir())
-    res = run_charctl("eval", str(run_dir), "--pose-error", "--dtw", "-o", str(tmp_path / "eval"))
+    res = charctl_main("eval", str(run_dir), "--pose-error", "--dtw", "-o", str(tmp_path / "eval"))
     assert res.returncode == 0, res.stderr[-2000:]
     report = (tmp_path / "eval" / "report.md").read_text()
     assert "nearest neighbour" in report and "paper Table 5" in report and "DTW" in report
@@ -408,7 +408,7 @@ def test_smoke_train_eval_export_end_to_end(tmp_path):
     result = json.loads((tmp_path / "eval" / "pose_error.json").read_text())
     tf = result["teacher_forced"]
     assert all(0.0 < r["all"] < 90.0 for r in tf.values())
-    res = run_charctl(
+    res = charctl_main(
         "export",
         str(run_dir),
         "--com-path",
@@ -424,5 +424,5 @@ def test_smoke_train_eval_export_end_to_end(tmp_path):
     motion = read_bvh(tmp_path / "gen.bvh")
     assert motion.num_frames == 90 + 30 and np.all(np.isfinite(motion.frames))
     assert "frames/s" in res.stdout
-    bad = run_charctl("export", str(run_dir), "--com-path", str(tmp_path / "missing.csv"))
+    bad = charctl_main("export", str(run_dir), "--com-path", str(tmp_path / "missing.csv"))
     assert_one_line_error(bad, "com path")

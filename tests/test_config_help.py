@@ -7,7 +7,7 @@ from charctl.config_help import explain, knobs, source_of
 from charctl.errors import CharctlError
 from charctl.experiments import EXPERIMENTS, load
 
-from conftest import run_charctl
+from conftest import REPO, charctl_in_process
 
 
 @pytest.mark.parametrize("experiment", sorted(EXPERIMENTS))
@@ -44,10 +44,11 @@ def test_explain_a_section_and_an_unknown_key():
 
 
 def test_cli_explain():
-    ok = run_charctl("config", "cgail", "scale=smoke", "--explain", "env.num_envs")
+    """`charctl config ... --explain` through charctl.cli.main in this process, from the repository root."""
+    ok = charctl_in_process("config", "cgail", "scale=smoke", "--explain", "env.num_envs", cwd=REPO)
     assert ok.returncode == 0, ok.stderr
     assert ok.stdout.startswith("env.num_envs: ") and "set by conf/preset/cgail/smoke.yaml" in ok.stdout
-    bad = run_charctl("config", "cgail", "--explain", "nope")
+    bad = charctl_in_process("config", "cgail", "--explain", "nope", cwd=REPO)
     assert bad.returncode == 2 and bad.stderr.strip().startswith("error: no config key 'nope'")
 
 

@@ -4,7 +4,7 @@ The commands are extracted from the fenced code blocks and inline code spans of 
 
 - fast (every `make test`): each `charctl train` command's config - every job of a `-m` sweep - is
   composed and validated exactly as written (`charctl config EXP job...`), and the cheap commands
-  (`data`, `config`, `export bvh`) run as written;
+  (`data`, `config`, `export bvh`) run as written (both through `charctl.cli.main` in the test process);
 - slow (`make test-slow`): every command runs through the real CLI at smoke scale: `scale=smoke`
   appended to train and experiment-level eval/export commands, run placeholders (RUN, RUN_CGAIL,
   outputs/srb/<run>, ...) replaced by smoke runs made for the purpose, optional `[...]` parts dropped,
@@ -23,7 +23,7 @@ from pathlib import Path
 
 import pytest
 
-from conftest import REPO, assert_one_line_error, cli_env, run_charctl
+from conftest import REPO, assert_one_line_error, charctl_in_process, cli_env, run_charctl
 
 PAGES = [REPO / "README.md", *sorted((REPO / "docs").glob("*.md"))]
 EXPERIMENTS = ("cgail", "srb", "com-cnn", "motion-matching", "hopper-ga")
@@ -176,7 +176,7 @@ CHEAP = [
 
 @pytest.mark.parametrize("cmd", CHEAP, ids=[c.id for c in CHEAP])
 def test_cheap_command_runs_as_written(cmd, tmp_path):
-    res = run_charctl(*cmd.argv, cwd=tmp_path)
+    res = charctl_in_process(*cmd.argv, cwd=tmp_path)
     assert res.returncode == 0, f"{cmd.text!r} in {cmd.id}: {res.stderr.strip()}"
     assert "Traceback" not in res.stderr
 

@@ -1,7 +1,10 @@
 """Fault injection through the real CLI (a `charctl` subprocess per case, as a user runs it).
 
 - bad input (>= 30 cases over the five experiments and the clip tools): exit 2, exactly one
-  `error:` line on stderr, no traceback, nothing new on disk (no run directory, no output file);
+  `error:` line on stderr, no traceback, nothing new on disk (no run directory, no output file).
+  The first case of each command (`train cgail`, `train cgail -m`, `eval RUN`, `export bvh`, ...) and
+  every case that sets its own environment run as a subprocess; the others call `charctl.cli.main` in
+  the test process (same parsing, validation and one-line errors, without an interpreter start-up each);
 - Ctrl-C once or twice and SIGTERM: exit 130 / 143, "interrupted at ...", a loadable checkpoint,
   also when the second Ctrl-C lands inside the checkpoint write;
 - SIGKILL at five random moments of a run (one inside a slowed checkpoint write), then `--resume`:
@@ -27,7 +30,7 @@ from pathlib import Path
 
 import pytest
 
-from conftest import CHARCTL, REPO, assert_one_line_error, cli_env, run_charctl
+from conftest import CHARCTL, REPO, assert_one_line_error, charctl_in_process, cli_env, run_charctl
 
 LIMIT = 900  # seconds: an upper bound for any one command (the suite takes ~2 min on 2 idle cores)
 
@@ -160,12 +163,11 @@ def wait_until(predicate, timeout: float = 60, every: float = 0.01) -> bool:
 
 # ---------------------------------------------------------------------------- shared runs
 @pytest.fixture(scope="module")
-def cgail_run(tmp_path_factory) -> Path:
-    """A finished smoke cgail run (skills walk, right_kick) for export / eval / play cases."""
-    root = tmp_path_factory.mktemp("cgail-run")
-    res = run_charctl("train", "cgail", "scale=smoke", f"output_root={root}", cwd=root, timeout=LIMIT)
-    assert res.returncode == 0, res.stderr
-    return run_dirs(root, "cgail")[-1]
+def cgail_run(smoke_run) -> Path:
+    """A finished smoke cgail run (skills walk, right_kick) for export / eval / play cases: the session's
+    `charctl train cgail scale=smoke` (conftest.smoke_run, made once through the console script), which
+    these cases only read; each checks that nothing new appears in it."""
+    return smoke_run("cgail")
 
 
 @pytest.fixture(scope="module")
@@ -277,6 +279,25 @@ BAD_INPUTS = [
 NEEDS_CGAIL_RUN = {case[0] for case in BAD_INPUTS if "{cgail}" in case[1]}
 
 
+def _subprocess_cases() -> set[str]:
+    """The cases run as a `charctl` subprocess: the first of each command (its words before the overrides,
+    and whether it is a multirun) - a fresh interpreter whose start-up for that command must print nothing
+    but the one error line - and every case with its own environment (read at start-up: MUJOCO_GL,
+    DISPLAY, IMAGEIO_FFMPEG_EXE). The rest run in the test process (conftest.charctl_in_process)."""
+    seen: set[tuple] = set()
+    out: set[str] = set()
+    for name, template, _, extra_env in BAD_INPUTS:
+        words = template.split()
+        command = (words[0], words[1], "-m" in words)
+        if extra_env or command not in seen:
+            out.add(name)
+        seen.add(command)
+    return out
+
+
+IN_SUBPROCESS = _subprocess_cases()
+
+
 def _run_bad_input(case, root: Path, cgail: Path | None, zeroq: Path) -> dict:
     name, template, words, extra_env = case
     sandbox = root / name
@@ -299,7 +320,11 @@ def _run_bad_input(case, root: Path, cgail: Path | None, zeroq: Path) -> dict:
             env[k] = v
     watched = [sandbox] + ([cgail] if cgail and "{cgail}" in template else [])
     before = snapshot(*watched)
-    res = run_charctl(*[a.format(**values) for a in template.split()], cwd=sandbox, env=env, timeout=LIMIT)
+    args = [a.format(**values) for a in template.split()]
+    if name in IN_SUBPROCESS:
+        res = run_charctl(*args, cwd=sandbox, env=env, timeout=LIMIT)
+    else:
+        res = charctl_in_process(*args, cwd=sandbox)
     return {
         "res": res,
         "new": sorted(snapshot(*watched) - before),
@@ -310,8 +335,9 @@ def _run_bad_input(case, root: Path, cgail: Path | None, zeroq: Path) -> dict:
 
 @pytest.fixture(scope="module")
 def bad_input_results(request, tmp_path_factory, zero_quaternion_file) -> dict:
-    """Every selected bad-input case, run concurrently (each in its own sandbox folder): the cases
-    are independent, and a charctl start-up is mostly imports."""
+    """Every selected bad-input case, each in its own sandbox folder: the subprocess cases concurrently
+    (they are independent, and a charctl start-up is mostly imports), the in-process ones meanwhile in
+    this thread (they change the working directory and sys.stdout, so one at a time)."""
     from concurrent.futures import ThreadPoolExecutor
 
     selected = {
@@ -323,8 +349,14 @@ def bad_input_results(request, tmp_path_factory, zero_quaternion_file) -> dict:
     cgail = request.getfixturevalue("cgail_run") if any(c[0] in NEEDS_CGAIL_RUN for c in cases) else None
     root = tmp_path_factory.mktemp("bad-input")
     with ThreadPoolExecutor(max_workers=4) as pool:
-        results = pool.map(lambda c: _run_bad_input(c, root, cgail, zero_quaternion_file), cases)
-        return {c[0]: r for c, r in zip(cases, results)}
+        running = {
+            c[0]: pool.submit(_run_bad_input, c, root, cgail, zero_quaternion_file)
+            for c in cases
+            if c[0] in IN_SUBPROCESS
+        }
+        results = {c[0]: _run_bad_input(c, root, cgail, zero_quaternion_file) for c in cases if c[0] not in running}
+        results.update({name: future.result() for name, future in running.items()})
+    return results
 
 
 @pytest.mark.parametrize("case", BAD_INPUTS, ids=[c[0] for c in BAD_INPUTS])

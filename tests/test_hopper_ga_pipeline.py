@@ -15,7 +15,7 @@ from charctl.experiments.hopper_ga.ga import evolve
 from charctl.experiments.hopper_ga.model import settings_from_config
 from charctl.experiments.hopper_ga.runtime import make_evaluator
 
-from conftest import assert_one_line_error, run_charctl
+from conftest import assert_one_line_error, charctl_in_process, run_charctl
 
 
 def small_cfg(**over):
@@ -132,7 +132,7 @@ def test_cli_train_with_ray_export_and_report(tmp_path):
     ray_best = json.loads((run_dir / "best_genome.json").read_text())["genes"]
     np.testing.assert_array_equal(np.array(list(ray_best.values())), local.best_genome)
 
-    res = run_charctl(
+    res = charctl_in_process(  # `charctl export RUN ...` in this process: the run came from the CLI above
         "export",
         str(run_dir),
         "--bvh",
@@ -141,7 +141,6 @@ def test_cli_train_with_ray_export_and_report(tmp_path):
         str(tmp_path / "run.mp4"),
         "--seconds",
         "0.2",
-        timeout=240,
     )
     assert res.returncode == 0, res.stdout + res.stderr
     from charctl.motion.bvh import read_bvh
@@ -169,6 +168,7 @@ def test_cli_train_with_ray_export_and_report(tmp_path):
     ],
 )
 def test_cli_bad_input_is_one_line(args, must, tmp_path):
-    assert_one_line_error(
-        run_charctl(*args, f"output_root={tmp_path}") if args[0] == "train" else run_charctl(*args), must
-    )
+    """Through charctl.cli.main in this process (test_faults.py runs `train hopper-ga` and `export hopper-ga`
+    bad input as real processes)."""
+    extra = [f"output_root={tmp_path}"] if args[0] == "train" else []
+    assert_one_line_error(charctl_in_process(*args, *extra, cwd=tmp_path), must)

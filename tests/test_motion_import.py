@@ -20,7 +20,7 @@ import pytest
 
 from charctl.errors import CharctlError
 
-from conftest import REPO, assert_one_line, assert_one_line_error, run_charctl
+from conftest import REPO, assert_one_line, assert_one_line_error, charctl_in_process, run_charctl
 
 DATA = REPO / "tests" / "data"
 # file -> (skeleton map detected, up axis, units) ; every file is real motion capture (tests/data/README.md)
@@ -366,24 +366,26 @@ def test_bad_input_is_a_one_line_error(case, tmp_path):
     assert_one_line(e.value, *words)
 
 
-@pytest.mark.parametrize(
-    "args,words",
-    [
-        (["{tmp}/truncated.bvh"], ["truncated.bvh", "motion values"]),
-        (["{tmp}/unknown_channel.bvh"], ["Xscale"]),
-        (["{tmp}/walk.txt"], ["BVH files"]),
-        (["{data}/cmu_walk.bvh", "--skeleton", "{tmp}/wrong.yaml"], ["RightFooot"]),
-        (["{data}/cmu_walk.bvh", "-o", "{tmp}/out.bvh"], ["ending in .txt"]),
-        (["{data}/cmu_walk.bvh", "--fps", "nan"], ["--fps"]),
-        (["{data}/cmu_walk.bvh", "-o", "{tmp}"], ["folder"]),
-        (["{tmp}/nothing_here.bvh"], ["not found"]),
-    ],
-)
+CLI_BAD_INPUT = [
+    (["{tmp}/truncated.bvh"], ["truncated.bvh", "motion values"]),
+    (["{tmp}/unknown_channel.bvh"], ["Xscale"]),
+    (["{tmp}/walk.txt"], ["BVH files"]),
+    (["{data}/cmu_walk.bvh", "--skeleton", "{tmp}/wrong.yaml"], ["RightFooot"]),
+    (["{data}/cmu_walk.bvh", "-o", "{tmp}/out.bvh"], ["ending in .txt"]),
+    (["{data}/cmu_walk.bvh", "--fps", "nan"], ["--fps"]),
+    (["{data}/cmu_walk.bvh", "-o", "{tmp}"], ["folder"]),
+    (["{tmp}/nothing_here.bvh"], ["not found"]),
+]
+
+
+@pytest.mark.parametrize("args,words", CLI_BAD_INPUT)
 def test_cli_bad_input_is_one_line_and_writes_nothing(args, words, tmp_path):
+    """The first case as a real `charctl` process, the others through charctl.cli.main in this process."""
     _bad_files(tmp_path)
     before = sorted(p.name for p in tmp_path.rglob("*"))
     argv = [a.format(tmp=tmp_path, data=DATA) for a in args]
-    res = run_charctl("data", "import", *argv, cwd=tmp_path)
+    run = run_charctl if args == CLI_BAD_INPUT[0][0] else charctl_in_process
+    res = run("data", "import", *argv, cwd=tmp_path)
     assert_one_line_error(res, *words)
     assert sorted(p.name for p in tmp_path.rglob("*")) == before  # no clip, no report, no imported/ folder
 
@@ -462,7 +464,7 @@ def test_imported_clip_feeds_every_experiment(cli_import):
 
 def test_data_show_of_an_imported_clip(cli_import):
     _, clip_path, _ = cli_import
-    res = run_charctl("data", "show", str(clip_path))
+    res = charctl_in_process("data", "show", str(clip_path))
     assert res.returncode == 0, res.stderr
     for word in ("imported_from", "bandai_namco_walk.bvh", "skeleton_map", "unity", "targets_met"):
         assert word in res.stdout

@@ -4,15 +4,14 @@ error metric, CSV errors, and end-to-end smoke runs of the sweep and the export 
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
 
 from charctl.errors import CharctlError
 from charctl.motion import rotations as R
+
+from conftest import charctl_in_process
 
 EXP = "motion-matching"
 
@@ -272,15 +271,11 @@ def test_bad_path_csv_is_a_one_line_error(tmp_path, text, needle):
 
 
 def test_bad_path_csv_on_the_command_line(tmp_path):
+    """Through charctl.cli.main in this process (test_faults.py runs `export motion-matching` bad input as a
+    real process)."""
     f = tmp_path / "bad.csv"
     f.write_text("x,z\n0,0\n1,oops\n")
-    exe = Path(sys.executable).with_name("charctl")
-    res = subprocess.run(
-        [str(exe), "export", EXP, f"path={f}", "scale=smoke", "--bvh", str(tmp_path / "o.bvh")],
-        capture_output=True,
-        text=True,
-        timeout=60,
-    )
+    res = charctl_in_process("export", EXP, f"path={f}", "scale=smoke", "--bvh", str(tmp_path / "o.bvh"), cwd=tmp_path)
     assert res.returncode == 2
     lines = res.stderr.strip().splitlines()
     assert len(lines) == 1 and "bad.csv:3" in lines[0] and "Traceback" not in res.stderr
