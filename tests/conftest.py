@@ -195,3 +195,12 @@ def smoke_run_copy(smoke_run, tmp_path):
         return Path(shutil.copytree(src, tmp_path / name / src.name))
 
     return copy
+
+
+def snapshot(*roots: Path) -> set[str]:
+    """Every file and folder under `roots` (what a failed command must not change)."""
+    out: set[str] = set()
+    for root in roots:
+        if root.exists():
+            out |= {str(p) for p in root.rglob("*")}
+    return out

@@ -30,21 +30,12 @@ from pathlib import Path
 
 import pytest
 
-from conftest import CHARCTL, REPO, assert_one_line_error, charctl_in_process, cli_env, run_charctl
+from conftest import CHARCTL, REPO, assert_one_line_error, charctl_in_process, cli_env, run_charctl, snapshot
 
 LIMIT = 900  # seconds: an upper bound for any one command (the suite takes ~2 min on 2 idle cores)
 
 
 # ---------------------------------------------------------------------------- helpers
-def snapshot(*roots: Path) -> set[str]:
-    """Every file and folder under `roots` (what a failed command must not change)."""
-    out: set[str] = set()
-    for root in roots:
-        if root.exists():
-            out |= {str(p) for p in root.rglob("*")}
-    return out
-
-
 def unwritable_dir(tmp_path: Path) -> Path:
     """A folder nobody may write into. Root ignores permission bits, so root gets a /sys path
     (mkdir there fails with EPERM, files with EACCES)."""

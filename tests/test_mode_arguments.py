@@ -19,7 +19,7 @@ from pathlib import Path
 
 import pytest
 
-from conftest import REPO, assert_one_line_error
+from conftest import REPO, assert_one_line_error, snapshot
 
 PRETRAINED = REPO / "pretrained"
 
@@ -72,14 +72,6 @@ MODES = [
     ("export-hopper-bvh", "export {hopper} --bvh {out}/h.bvh --seconds 0", ["--seconds"]),
     ("export-hopper-video", "export {hopper} --video {out}/h.mp4 --fps -5", ["--fps"]),
 ]
-
-
-def snapshot(*roots: Path) -> set[str]:
-    out: set[str] = set()
-    for root in roots:
-        if root.exists():
-            out |= {str(p) for p in root.rglob("*")}
-    return out
 
 
 @pytest.fixture(scope="module")
