@@ -268,8 +268,8 @@ def test_performed_after_switch_counts_a_replayed_kick_and_not_a_stance():
     import numpy as np
 
     from charctl.experiments.cgail.config import SkillConfig
-    from charctl.experiments.cgail.evaluate import performed_after_switch
     from charctl.experiments.cgail.fidelity import clip_reference
+    from charctl.experiments.cgail.metrics import performed_after_switch
     from charctl.experiments.cgail.skills import load_skills
 
     kick = load_skills([SkillConfig("right_kick", "kick")], 30.0)[0]

@@ -51,7 +51,7 @@ def test_eval_device_cpu_gives_the_default_numbers(smoke_run, tmp_path):
 
 
 def test_eval_run_networks_sit_on_the_chosen_device(smoke_run):
-    from charctl.experiments.cgail.evaluate import load_eval_run
+    from charctl.experiments.cgail.rollouts import load_eval_run
 
     tr = load_eval_run(smoke_run("cgail"), "cpu")
     assert tr.device == "cpu"

@@ -89,7 +89,7 @@ def evaluate_checkpoint(
 ) -> dict:
     """No-fall and Fig 6.8 diagonal per skill of one checkpoint, and with `fidelity_k` > 0 its fidelity
     over that many episodes per skill (each part reused from out/row.json when its settings match)."""
-    from charctl.experiments.cgail.evaluate import load_eval_run
+    from charctl.experiments.cgail.rollouts import load_eval_run
     from charctl.files import atomic_write_text, strict_json
 
     row = cached_row(out, name, samples, seconds, k, ck, seed)
@@ -269,8 +269,8 @@ def checkpoints(targets: list[str], options: dict, overrides: list[str]) -> Cgai
     """The `checkpoints` entry point: the settings of `--checkpoints`, every argument checked (one run, a
     conditional one, no other mode but --survival / --fidelity, a known --rank, a machine that can draw the
     confirmation's filmstrips when fidelity is measured) before anything is written."""
-    from charctl.experiments.cgail.evaluate import split_eval_overrides
     from charctl.experiments.cgail.policy import resolve_run_dirs
+    from charctl.experiments.cgail.rollouts import split_eval_overrides
     from charctl.runs import read_run_config, run_experiment
 
     device, overrides = split_eval_overrides(overrides)

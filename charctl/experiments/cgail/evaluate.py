@@ -21,14 +21,10 @@ import torch
 from charctl.checkpoints import checkpoint_file_name
 from charctl.errors import CharctlError
 from charctl.experiments.cgail.metrics import (
-    PAPER_TABLE_6_1,
     PERFORM_SECONDS,
     PERFORM_SHARE,
     confusion_matrices,
-    dtw_pose_error,
     dtw_table,
-    performed_after_switch,
-    skill_reference,
     survival_table,
     switch_curves,
     switch_summary,
@@ -43,39 +39,20 @@ from charctl.experiments.cgail.report import (
     write_switch,
 )
 from charctl.experiments.cgail.rollouts import (
-    EVAL_OVERRIDES,
     DeviceRun,
-    SkillRollout,
-    eval_device,
     load_eval_run,
-    rollout_skill,
     split_eval_overrides,
-    survival_rollout,
     switch_rollout,
 )
 
-__all__ = [  # what callers import from here (the modes, and the pieces they are made of)
-    "EVAL_OVERRIDES",
-    "PAPER_TABLE_6_1",
-    "PERFORM_SECONDS",
-    "PERFORM_SHARE",
-    "DeviceRun",
-    "SkillRollout",
+__all__ = [
     "check_mode_arguments",
-    "dtw_pose_error",
     "eval_confusion",
     "eval_curves",
-    "eval_device",
     "eval_dtw",
     "eval_survival",
     "eval_switch",
     "evaluate",
-    "load_eval_run",
-    "performed_after_switch",
-    "rollout_skill",
-    "skill_reference",
-    "split_eval_overrides",
-    "survival_rollout",
 ]
 
 
