@@ -1,6 +1,6 @@
 """Early termination on a large pose error against the commanded clip (reward.pose_error_threshold):
 the error by hand, the reference's timing (RSI, restart of a non-looping clip, start after a command
-switch's ramp), the closest-frame rule of looping clips, and the learner's counters."""
+switch's ramp), the closest-frame rule of locomotion clips, and the learner's counters."""
 
 import numpy as np
 import pytest
@@ -13,7 +13,7 @@ from charctl.experiments.cgail.skills import load_skills
 
 @pytest.fixture(scope="module")
 def skills():
-    return load_skills([SkillConfig("walk", "walk"), SkillConfig("kick", "kick")], 30.0)
+    return load_skills([SkillConfig("walk", "walk", heading_goal=True), SkillConfig("kick", "kick")], 30.0)
 
 
 def _env(skills, n=2, threshold=0.5, grace=3, ramp=4):
@@ -61,7 +61,7 @@ def test_a_switch_suspends_the_check_until_the_ramp_ends_then_starts_the_new_cli
     assert env.ref_active.tolist() == [True, True] and env.ref_frame[0] == 0 and env.ref_grace[0] == 2
 
 
-def test_looping_clips_are_scored_against_their_closest_frame_and_others_against_the_timed_one(skills):
+def test_locomotion_clips_are_scored_against_their_closest_frame_and_others_against_the_timed_one(skills):
     env = _env(skills)
     env.cmd[:] = [0, 1]
     obs = np.stack([skills[0].obs[17], skills[1].obs[20]])
@@ -70,6 +70,20 @@ def test_looping_clips_are_scored_against_their_closest_frame_and_others_against
     assert err[0] == pytest.approx(0.0, abs=1e-12) and np.array_equal(scored[0], skills[0].obs[17])
     assert np.array_equal(scored[1], skills[1].obs[3])
     assert err[1] == pytest.approx(reference_pose_error(obs[1:], skills[1].obs[3:4])[0]) and err[1] > 0.5
+
+
+def test_an_in_place_looping_clip_keeps_its_timing():
+    """The jump loops but has no heading goal: a pose held from its crouch is scored against the frame the
+    clip has moved on to (the closest-frame rule would let a standing policy pass it)."""
+    skills = load_skills([SkillConfig("walk", "walk", heading_goal=True), SkillConfig("jump", "jump")], 30.0)
+    assert skills[1].loop and not skills[1].heading_goal
+    env = _env(skills)
+    env.cmd[:] = [1, 1]
+    crouch = skills[1].obs[0]
+    env.ref_frame[:] = [0, 25]  # at frame 0 the pose is the reference; 25 frames (0.83 s) later the jump is airborne
+    err, scored = env._pose_error(np.stack([crouch, crouch]), env._reference_obs())
+    assert err[0] == pytest.approx(0.0, abs=1e-12) and np.array_equal(scored[1], skills[1].obs[25])
+    assert err[1] == pytest.approx(reference_pose_error(crouch[None], skills[1].obs[25:26])[0]) and err[1] > 0.3
 
 
 def test_episodes_that_leave_the_reference_end_without_counting_a_fall(skills):

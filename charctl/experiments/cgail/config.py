@@ -18,7 +18,9 @@ class SkillConfig:
 
     name: str = "walk"
     clip: str = "walk"  # charctl clip spec (catalogue name, ':mirror' for the mirrored copy)
-    heading_goal: bool = False  # locomotion skills get the heading goal r_G; others r_G = 1
+    # locomotion skills get the heading goal r_G (others r_G = 1), and the pose-error check scores them against
+    # their clip's closest frame (a cadence of their own); the others follow the clip's timing
+    heading_goal: bool = False
 
 
 def paper_skills() -> list[SkillConfig]:

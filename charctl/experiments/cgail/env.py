@@ -285,11 +285,13 @@ class CgailEnv:
         return ref
 
     def _pose_error(self, obs: np.ndarray, ref: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """((N,) m, (N, 133)): `reference_pose_error` against the timed reference `ref` for non-looping clips,
-        and against the clip's closest frame for looping ones (locomotion: a cadence of its own is no error);
-        with the reference each env was scored against."""
+        """((N,) m, (N, 133)): `reference_pose_error` against the timed reference `ref`, except for skills with a
+        heading goal (locomotion), scored against their clip's closest frame: a walk at a cadence of its own is
+        no error. In-place looping clips (jump, dances, spinkick) keep the timed reference, so standing in
+        one of their poses is an error once the clip moves on. Returns the reference each env was scored
+        against as well."""
         err, ref = reference_pose_error(obs, ref), ref.copy()
-        for s in np.unique(self.cmd[self.clip_loops[self.cmd]]):
+        for s in np.unique(self.cmd[self.has_goal[self.cmd]]):
             m = np.flatnonzero(self.cmd == s)
             clip = self.skills[s].obs
             each = reference_pose_error(np.repeat(obs[m], len(clip), axis=0), np.tile(clip, (len(m), 1)))
