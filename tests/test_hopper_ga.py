@@ -13,7 +13,10 @@ import pytest
 from omegaconf import OmegaConf
 from scipy.optimize import brentq
 
+from charctl.experiments.hopper_ga import body as HB
+from charctl.experiments.hopper_ga import hopper as HH
 from charctl.experiments.hopper_ga import model as M
+from charctl.experiments.hopper_ga import settings as HS
 from charctl.experiments.hopper_ga.config import Config
 
 # A valid individual at 5 m/s and one at 2 m/s (found by seeded random search with the default bounds).
@@ -61,11 +64,11 @@ GENOME_2 = [
 ]
 
 
-def settings(**over) -> M.Settings:
+def settings(**over) -> HS.Settings:
     cfg = OmegaConf.structured(Config)
     for k, v in over.items():
         OmegaConf.update(cfg, k, v)
-    return M.settings_from_config(cfg)
+    return HS.settings_from_config(cfg)
 
 
 # ---------------------------------------------------------------------------- eq 1-4
@@ -75,7 +78,7 @@ def test_flight_time_matches_independent_ballistic_root():
     vy0 = rng.uniform(-1.0, 4.0, 200)
     yf = rng.uniform(0.5, 1.2, 200)
     g = -9.81
-    T = M.flight_time(y0, vy0, yf, g)
+    T = HH.flight_time(y0, vy0, yf, g)
     for i in range(200):
         f = lambda t: y0[i] + vy0[i] * t + 0.5 * g * t * t - yf[i]  # noqa: E731, B023 (called in this iteration)
         t_apex = max(vy0[i] / -g, 0.0)
@@ -90,7 +93,7 @@ def _vertical_energy(h: float, xdot: float = 0.0, theta0: float = 0.0, steps: in
     """Stance of eq 2 for a 1-leg hopper; returns t, x, y, and the spring-mass energy terms."""
     l, kappa, m, g = 1.0, 9000.0, 60.0, -9.81
     n = steps or int(round(0.6 / h))
-    st = M.integrate_stance(
+    st = HH.integrate_stance(
         np.array([l]),
         np.array([kappa]),
         np.array([theta0]),
@@ -140,7 +143,7 @@ def test_b_curve_endpoints_and_extremum():
     T = 0.37
     for alpha in (0.6, 0.9, 1.0):
         tau = np.linspace(0, T, 20001)
-        B = M.b_curve(tau, T, alpha)
+        B = HH.b_curve(tau, T, alpha)
         assert B[0] == pytest.approx(0.0) and B[-1] == pytest.approx(1.0)
         if alpha < 1.0:
             assert tau[np.argmax(B)] == pytest.approx(alpha * T, abs=T / 10000)
@@ -148,13 +151,13 @@ def test_b_curve_endpoints_and_extremum():
 
 def test_knee_keeps_hip_foot_distance_and_leg_length():
     s = settings(speed=5.0)
-    p = M.decode(np.array([GENOME_5]), s)
-    c = M.leg_cycle(p, s)
+    p = HS.decode(np.array([GENOME_5]), s)
+    c = HH.leg_cycle(p, s)
     assert c.code[0] == 0
-    tl = M.single_cycle_timeline(c, p, s)
-    legs = M.leg_points(tl, s)
+    tl = HB.single_cycle_timeline(c, p, s)
+    legs = HB.leg_points(tl, s)
     l = p.l[0]
-    a, b = M.leg_lengths(p.l, s)
+    a, b = HH.leg_lengths(p.l, s)
     thigh = np.linalg.norm(legs.knee - legs.hip, axis=-1)
     shank = np.linalg.norm(legs.foot - legs.knee, axis=-1)
     np.testing.assert_allclose(thigh + shank, l, atol=1e-9)  # |HIP-JOINT| + |JOINT-FOOT| = l
@@ -206,7 +209,7 @@ def test_balance_moves_the_com_towards_the_target_on_both_axes():
     upper body so that the COM closes in on the target (the sign conventions of eq 11)."""
     s = settings(speed=2.0)
     K = 150
-    tl = M.Timeline(
+    tl = HB.Timeline(
         t=np.arange(K)[None] * s.h,
         dt=np.full((1, K), s.h),
         mask=np.ones((1, K), bool),
@@ -221,8 +224,8 @@ def test_balance_moves_the_com_towards_the_target_on_both_axes():
         l=np.array([0.9]),
     )
     D = s.body.num_dofs
-    still = M.run_balance(tl, np.zeros((1, D)), s)
-    moving = M.run_balance(tl, np.full((1, D), 5.0), s)
+    still = HB.run_balance(tl, np.zeros((1, D)), s)
+    moving = HB.run_balance(tl, np.full((1, D), 5.0), s)
     assert np.allclose(still.angles, 0.0) and np.allclose(still.com[0, -1], still.com[0, 0])
     start = np.abs(tl.target[0, 0] - moving.com[0, 0, [0, 2]])
     end = np.abs(tl.target[0, -1] - moving.com[0, -1, [0, 2]])
@@ -256,11 +259,11 @@ def test_impossible_genomes_are_marked_invalid_not_crashed_on():
     out = M.evaluate_genomes(np.stack([good, soft, nan, outside, scrape]), s)
     assert list(out["valid"]) == [True, False, False, False, False]
     assert np.isfinite(out["fitness"][0]) and np.all(np.isinf(out["fitness"][1:]))
-    assert out["code"][2] & M.BAD_GENE and out["code"][3] & M.BAD_GENE
-    assert out["code"][4] & M.FOOT_GROUND
-    assert M.describe_invalid(int(out["code"][1])) != "valid"
+    assert out["code"][2] & HS.BAD_GENE and out["code"][3] & HS.BAD_GENE
+    assert out["code"][4] & HS.FOOT_GROUND
+    assert HS.describe_invalid(int(out["code"][1])) != "valid"
     # T not real: a lift-off below y_f with too little upward speed
-    assert np.isnan(M.flight_time(0.5, 0.1, 0.8, -9.81))
+    assert np.isnan(HH.flight_time(0.5, 0.1, 0.8, -9.81))
 
 
 def test_evaluation_rows_do_not_depend_on_the_batch():

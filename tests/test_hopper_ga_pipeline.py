@@ -12,8 +12,8 @@ from omegaconf import OmegaConf
 
 from charctl.experiments.hopper_ga.config import Config
 from charctl.experiments.hopper_ga.ga import evolve
-from charctl.experiments.hopper_ga.model import settings_from_config
 from charctl.experiments.hopper_ga.runtime import make_evaluator
+from charctl.experiments.hopper_ga.settings import settings_from_config
 
 from conftest import assert_one_line_error, charctl_in_process, run_charctl
 

@@ -14,17 +14,10 @@ from pathlib import Path
 import numpy as np
 
 from charctl.errors import CharctlError
-from charctl.experiments.hopper_ga.model import (
-    Rollout,
-    Settings,
-    _finish,
-    decode,
-    describe_invalid,
-    dof_to_joint_angles,
-    leg_cycle,
-    leg_lengths,
-    repeat_cycles,
-)
+from charctl.experiments.hopper_ga.body import dof_to_joint_angles, repeat_cycles
+from charctl.experiments.hopper_ga.hopper import leg_cycle, leg_lengths
+from charctl.experiments.hopper_ga.model import Rollout, _finish
+from charctl.experiments.hopper_ga.settings import Settings, decode, describe_invalid
 from charctl.motion.bvh import write_bvh_file
 
 # Capsule radii (m) of the rendered bodies (cosmetic; masses live in the config).

@@ -9,7 +9,8 @@ from pathlib import Path
 import numpy as np
 
 from charctl.errors import CharctlError
-from charctl.experiments.hopper_ga.model import Settings, describe_invalid, evaluate_genomes
+from charctl.experiments.hopper_ga.model import evaluate_genomes
+from charctl.experiments.hopper_ga.settings import Settings, describe_invalid
 
 NAME = "hopper-ga"
 
@@ -128,7 +129,7 @@ def load_best(run_dir: Path) -> tuple[np.ndarray, dict]:
 def open_hopper_run(run_dir: Path, overrides: list[str] | None = None):
     """(the re-opened run, its model Settings); a one-line error for a run of another experiment."""
     from charctl.experiments.hopper_ga.config import Config
-    from charctl.experiments.hopper_ga.model import settings_from_config
+    from charctl.experiments.hopper_ga.settings import settings_from_config
     from charctl.runs import open_run
 
     run = open_run(run_dir, Config, overrides or [])

@@ -14,7 +14,8 @@ from collections.abc import Callable
 import numpy as np
 
 from charctl.errors import CharctlError
-from charctl.experiments.hopper_ga.model import Settings, evaluate_genomes
+from charctl.experiments.hopper_ga.model import evaluate_genomes
+from charctl.experiments.hopper_ga.settings import Settings
 
 
 def _split(genomes: np.ndarray, parts: int) -> list[np.ndarray]:

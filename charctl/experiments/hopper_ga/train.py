@@ -7,8 +7,8 @@ from __future__ import annotations
 import numpy as np
 
 from charctl.experiments.hopper_ga.ga import GAState, GeneticAlgorithm
-from charctl.experiments.hopper_ga.model import settings_from_config
 from charctl.experiments.hopper_ga.runtime import make_evaluator
+from charctl.experiments.hopper_ga.settings import settings_from_config
 
 
 class GaLearner:
