@@ -151,7 +151,8 @@ def test_mink_lifts_bodies_out_of_the_ground(tmp_path):
     two-bone stage; the mink refinement lifts them while the feet and hands stay on their targets."""
     from charctl.motion import import_report as rep
     from charctl.motion.library import load_clip
-    from charctl.motion.retarget import lowest_points, retarget
+    from charctl.motion.retarget import retarget
+    from charctl.motion.retarget.refine import lowest_points
 
     path = _turned_copy(load_clip("crawl").resample(60.0), tmp_path / "crawl.bvh")
     plain = retarget(path, refine=False)

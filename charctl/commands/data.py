@@ -120,7 +120,8 @@ def import_motion(
     Everything that can be wrong with the input is found before anything is written."""
     from charctl.motion import import_report as rep
     from charctl.motion.imported import write_imported_clip
-    from charctl.motion.retarget import DEFAULT_FPS, retarget
+    from charctl.motion.retarget import retarget
+    from charctl.motion.retarget.common import DEFAULT_FPS
     from charctl.options import check_options
 
     file = Path(file).expanduser()

@@ -22,7 +22,8 @@ from pathlib import Path
 
 import numpy as np
 
-from charctl.motion.retarget import SIDES, Retargeted, ee_errors, lowest_points
+from charctl.motion.retarget.common import SIDES, Retargeted
+from charctl.motion.retarget.refine import ee_errors, lowest_points
 from charctl.motion.skeleton import END_EFFECTORS
 
 # Targets (issue 27)
@@ -135,7 +136,7 @@ def foot_sliding(clip, side: str, height: float = CONTACT_CM / 100.0) -> tuple[n
     """Per frame step t -> t+1 and sole corner: horizontal displacement (T-1, 8) metres of the corners of
     the foot box, and whether that corner is on the ground (within `height`) at both t and t+1."""
     from charctl.motion import rotations as R
-    from charctl.motion.retarget import humanoid
+    from charctl.motion.retarget.common import humanoid
 
     corners = humanoid().foot_corners
     pos, rot = clip.fk
