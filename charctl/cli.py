@@ -142,7 +142,7 @@ def tune(
 ) -> None:
     """Hyper-parameter search on Ray Tune with ASHA early stopping: `charctl tune EXP key=loguniform(1e-5,1e-3)`."""
     from charctl.commands.tune import TuneOptions, tune_command
-    from charctl.launch.tune import SearchSettings
+    from charctl.launch.tune_setup import SearchSettings
 
     settings = SearchSettings(
         trials=trials,

@@ -256,7 +256,7 @@ def test_tune_four_smoke_trials_write_tables_plot_and_best_yaml(ray_cluster, tmp
     import yaml
 
     from charctl.commands.tune import TuneOptions, tune_command
-    from charctl.launch.tune import SearchSettings
+    from charctl.launch.tune_setup import SearchSettings
 
     out = tune_command(
         "hopper-ga",

@@ -12,7 +12,7 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 
 from charctl.errors import CharctlError
-from charctl.launch.tune import SearchSettings
+from charctl.launch.tune_setup import SearchSettings
 
 MODES = ("max", "min")
 
@@ -81,7 +81,8 @@ def tune_command(experiment: str, overrides: list[str], opts: TuneOptions) -> Pa
     from charctl.config import check_experiment
     from charctl.experiments import load
     from charctl.launch.search_space import parse_overrides
-    from charctl.launch.tune import TuneSetup, make_out_dir, run_tune
+    from charctl.launch.tune import make_out_dir, run_tune
+    from charctl.launch.tune_setup import TuneSetup
     from charctl.paths import check_writable_dir
 
     check_experiment(experiment)
