@@ -7,7 +7,7 @@ repro-motion-matching: install ## motion-matching: Table 1 sweep (19 cases x 3 p
 	$(CHARCTL) eval motion-matching --sweep -o $(MM_OUT)
 	$(CHARCTL) export motion-matching path=star case=best output_root=$(MM_OUT) --bvh $(MM_OUT)/star_best.bvh --video $(MM_OUT)/star_best.mp4
 	$(PY) scripts/bench_mm.py --json $(MM_OUT)/bench.json
-	$(PY) -m charctl.experiments.motion_matching.evaluate $(MM_OUT)
+	$(PY) -m charctl.experiments.motion_matching.report $(MM_OUT)
 	@echo "report: $(MM_OUT)/report.md"
 
 bench-motion-matching: install ## motion-matching: query latency (brute / kd-tree / bounding boxes, real and 50k frames) and real-time factor

@@ -329,7 +329,7 @@ def test_sweep_and_export_smoke(tmp_path):
     assert metrics["case"] == int(best) and metrics["e_time_mean"] < 1.0
     assert (run.parent / "path.png").is_file()
     np.testing.assert_allclose(clip.root_pos[0, [0, 2]], [0.0, 0.0], atol=1e-5)
-    from charctl.experiments.motion_matching.evaluate import write_report
+    from charctl.experiments.motion_matching.report import write_report
 
     text = write_report(out).read_text()
     assert "| 8 |" in text and "searches in the sweep ended in a jump" in text and "walker/turn_left0" in text
