@@ -33,7 +33,7 @@ def ry(theta: float) -> np.ndarray:
 # ---------------------------------------------------------------------------- windows
 def synthetic_sequence(body, T: int = 12):
     """Root walking along a bent line, pure-yaw root rotations a_k, the chest's exp map = (0.01 k, 0, 0)."""
-    from charctl.experiments.com_cnn.data import Sequence
+    from charctl.experiments.com_cnn.sequences import Sequence
 
     k = np.arange(T, dtype=float)
     yaw = 0.1 * k - 0.3
@@ -48,8 +48,9 @@ def synthetic_sequence(body, T: int = 12):
 
 @pytest.mark.parametrize("frame", ["root_t", "root_prev"])
 def test_windows_target_is_frame_t_history_ends_at_t_minus_1_in_the_reference_root_frame(frame):
+    from charctl.experiments.com_cnn.body import humanoid_body
     from charctl.experiments.com_cnn.config import ComConfig
-    from charctl.experiments.com_cnn.data import WindowSet, humanoid_body
+    from charctl.experiments.com_cnn.data import WindowSet
 
     body = humanoid_body(ComConfig())
     seq, yaw = synthetic_sequence(body)
@@ -77,7 +78,7 @@ def test_windows_target_is_frame_t_history_ends_at_t_minus_1_in_the_reference_ro
 
 
 def test_looping_clips_are_tiled_without_jumps_and_start_at_the_origin_facing_plus_z():
-    from charctl.experiments.com_cnn.data import heading_yaw, load_sequences
+    from charctl.experiments.com_cnn.sequences import heading_yaw, load_sequences
     from charctl.motion.library import load_clip
 
     cfg = compose("data.clips=[walker/turn_right0]", "data.test_clips=[]", "data.mirror=false")
@@ -109,8 +110,8 @@ def test_looping_clips_are_tiled_without_jumps_and_start_at_the_origin_facing_pl
 
 # ---------------------------------------------------------------------------- the paper's COM
 def test_humanoid_com_from_the_paper_mass_table_matches_a_hand_computation():
+    from charctl.experiments.com_cnn.body import humanoid_body
     from charctl.experiments.com_cnn.config import ComConfig
-    from charctl.experiments.com_cnn.data import humanoid_body
 
     body = humanoid_body(ComConfig())
     skel = body.skeleton
@@ -171,7 +172,7 @@ Frame Time: 0.0333333
 
 
 def test_bvh_com_puts_each_part_mass_halfway_to_its_child_hand_computed(tmp_path):
-    from charctl.experiments.com_cnn.data import bvh_body
+    from charctl.experiments.com_cnn.sequences import bvh_body
     from charctl.motion.bvh import read_bvh
 
     path = tmp_path / "tiny.bvh"
@@ -201,8 +202,8 @@ def test_bvh_com_puts_each_part_mass_halfway_to_its_child_hand_computed(tmp_path
 
 # ---------------------------------------------------------------------------- the network
 def test_network_shapes_follow_the_paper_table_2():
+    from charctl.experiments.com_cnn.body import humanoid_body
     from charctl.experiments.com_cnn.config import ComConfig
-    from charctl.experiments.com_cnn.data import humanoid_body
     from charctl.experiments.com_cnn.model import ComCNN
 
     assert humanoid_body(ComConfig()).pose_dim == 48  # 15 x 3 angles + root position
@@ -293,7 +294,7 @@ def test_com_clamp_never_moves_more_than_the_limit_and_keeps_the_direction():
 # ---------------------------------------------------------------------------- the split
 @pytest.mark.parametrize("test_clips", [None, ["walk", "kick"], ["walker/turn_left0", "run", "spin", "crawl"]])
 def test_split_never_puts_a_clip_and_its_mirror_on_both_sides(test_clips):
-    from charctl.experiments.com_cnn.data import load_sequences, split_sequences
+    from charctl.experiments.com_cnn.sequences import load_sequences, split_sequences
 
     cfg = compose() if test_clips is None else compose(f"data.test_clips=[{','.join(test_clips)}]")
     seqs, _ = load_sequences(cfg)

@@ -442,8 +442,9 @@ def test_imported_clip_feeds_every_experiment(cli_import):
     from charctl.config import compose_config
     from charctl.experiments.cgail.config import Config as CgailConfig
     from charctl.experiments.cgail.skills import load_skills, select_skills
+    from charctl.experiments.com_cnn.body import humanoid_body
     from charctl.experiments.com_cnn.config import Config as ComConfig
-    from charctl.experiments.com_cnn.data import humanoid_body, load_deepmimic
+    from charctl.experiments.com_cnn.sequences import load_deepmimic
     from charctl.experiments.motion_matching.config import Config as MmConfig
     from charctl.experiments.motion_matching.sources import humanoid_sources
 

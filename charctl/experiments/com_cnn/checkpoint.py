@@ -7,8 +7,9 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from charctl.errors import CharctlError
-from charctl.experiments.com_cnn.data import BodyModel, Sequence, load_sequences
+from charctl.experiments.com_cnn.body import BodyModel
 from charctl.experiments.com_cnn.rollout import CnnPredictor
+from charctl.experiments.com_cnn.sequences import Sequence, load_sequences
 
 
 @dataclass

@@ -17,16 +17,10 @@ from pathlib import Path
 import numpy as np
 
 from charctl.errors import CharctlError
-from charctl.experiments.com_cnn.data import (
-    XZ,
-    BodyModel,
-    Sequence,
-    canonical_start,
-    heading_frame,
-    heading_yaw,
-    make_sequence,
-)
+from charctl.experiments.com_cnn.body import BodyModel
+from charctl.experiments.com_cnn.data import heading_frame
 from charctl.experiments.com_cnn.rollout import Buffer, ReferenceFn, previous_root_reference, rollout
+from charctl.experiments.com_cnn.sequences import XZ, Sequence, canonical_start, heading_yaw, make_sequence
 from charctl.motion import rotations as R
 
 

@@ -15,7 +15,8 @@ from typing import Protocol
 
 import numpy as np
 
-from charctl.experiments.com_cnn.data import BodyModel, WindowSet, decode_pose, encode_pose, heading_frame
+from charctl.experiments.com_cnn.body import BodyModel
+from charctl.experiments.com_cnn.data import WindowSet, decode_pose, encode_pose, heading_frame
 from charctl.motion import rotations as R
 
 

@@ -11,7 +11,8 @@ import time
 
 import numpy as np
 
-from charctl.experiments.com_cnn.data import BodyModel, WindowSet, build_windows, constrain_joint_exp
+from charctl.experiments.com_cnn.body import BodyModel
+from charctl.experiments.com_cnn.data import WindowSet, build_windows, constrain_joint_exp
 from charctl.experiments.com_cnn.model import ComCNN, build_model, model_signature
 
 
