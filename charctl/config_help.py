@@ -6,7 +6,7 @@ lines right above it), so it is stated once, where the default is; this module r
 dataclass source. The layer is the last of conf/config.yaml -> experiment -> scale -> preset -> command
 line that names the key (charctl.config's composition order), or the schema when none does. The
 choices and the range are the field's own declarations (`Annotated[str, Literal[...]]`, `ranged(...)`),
-the ones charctl.config.check_fields enforces.
+the ones charctl.config_fields.check_fields enforces.
 """
 
 from __future__ import annotations
@@ -36,7 +36,7 @@ class Knob:
 
     def allowed(self) -> str:
         """'one of a, b' or '>= 0 and < 1' (list fields: 'each >= 1'); '' when nothing is declared."""
-        from charctl.config import range_text
+        from charctl.config_fields import range_text
 
         if self.choices:
             return "one of " + ", ".join(str(c) for c in self.choices)
@@ -81,7 +81,7 @@ def _default(f: dataclasses.Field) -> object:
 
 def knobs(schema: type, prefix: str = "") -> list[Knob]:
     """Every leaf field of `schema` (nested dataclasses walked), in declaration order."""
-    from charctl.config import field_range, schema_choices
+    from charctl.config_fields import field_range, schema_choices
 
     hints = typing.get_type_hints(schema)
     choices = schema_choices(schema)

@@ -29,7 +29,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from charctl.config import compose_config  # noqa: E402
+from charctl.config import compose_config
 from charctl.experiments.motion_matching.config import Config  # noqa: E402
 from charctl.experiments.motion_matching.database import build_database  # noqa: E402
 from charctl.experiments.motion_matching.paths import make_path  # noqa: E402

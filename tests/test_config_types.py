@@ -8,7 +8,8 @@ import pytest
 from omegaconf import OmegaConf
 from omegaconf.errors import ValidationError
 
-from charctl.config import BaseConfig, check_fields, compose_config, ranged, schema_choices, validate
+from charctl.config import BaseConfig, compose_config, validate
+from charctl.config_fields import check_fields, ranged, schema_choices
 from charctl.errors import CharctlError
 from charctl.experiments import load
 

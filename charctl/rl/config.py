@@ -5,7 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Annotated, Literal
 
-from charctl.config import check_fields, ranged
+from charctl.config_fields import check_fields, ranged
 
 
 @dataclass
@@ -45,7 +45,7 @@ class PPOConfig:
 
 
 def check_ppo(ppo) -> str | None:
-    """A PPO section's declared choices (charctl.config.check_fields, so a PPOConfig made in code is
+    """A PPO section's declared choices (charctl.config_fields.check_fields, so a PPOConfig made in code is
     checked too; validate checks the declared ranges) and its cross-field rules; a one-line message or None."""
     if (msg := check_fields(ppo, PPOConfig, "ppo.", ranges=False)) is not None:
         return msg

@@ -7,7 +7,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Annotated, Literal
 
-from charctl.config import BaseConfig, check_fields, ranged
+from charctl.config import BaseConfig
+from charctl.config_fields import check_fields, ranged
 from charctl.rl.config import PPOConfig, check_ppo
 from charctl.sim import CONTROL_HZ, JOINT_ARMATURE, PHYSICS_HZ
 
@@ -190,7 +191,7 @@ class Config(BaseConfig):
     @staticmethod
     def check(cfg) -> str | None:
         """Cross-field checks; returns a message or None. validate has checked each field's declared
-        choices and range (charctl.config.check_fields) before; the choices are checked here again for
+        choices and range (charctl.config_fields.check_fields) before; the choices are checked here again for
         callers of check alone."""
         if (msg := check_fields(cfg, Config, ranges=False)) is not None:  # declared choices (direct callers too)
             return msg

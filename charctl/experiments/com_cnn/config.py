@@ -8,7 +8,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Annotated, Literal
 
-from charctl.config import BaseConfig, check_fields, ranged
+from charctl.config import BaseConfig
+from charctl.config_fields import check_fields, ranged
 
 # Table 1 of the paper: mass per body part (total 62). Units are the paper's (only ratios matter).
 PAPER_MASS_TABLE = {

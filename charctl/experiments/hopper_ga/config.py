@@ -8,7 +8,8 @@ import math
 from dataclasses import dataclass, field
 from typing import Annotated, Literal
 
-from charctl.config import BaseConfig, check_fields, ranged
+from charctl.config import BaseConfig
+from charctl.config_fields import check_fields, ranged
 
 
 @dataclass

@@ -10,7 +10,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Annotated, Literal
 
-from charctl.config import BaseConfig, check_fields, ranged
+from charctl.config import BaseConfig
+from charctl.config_fields import check_fields, ranged
 from charctl.rl.config import PPOConfig, check_ppo
 
 
