@@ -1,7 +1,7 @@
 # cgail reproduction targets (included by the Makefile).
 CGAIL_SMALL := outputs/repro/cgail-small
 CGAIL_PAPER := outputs/repro/cgail-paper
-# The shipped amp-walk, tracking-walk and cgail-3skill were trained before the small preset moved to
+# The shipped amp-walk and tracking-walk (and the removed cgail-3skill) were trained before the small preset moved to
 # 150 Hz physics with 0.05 joint armature (docs/cgail.md, "Throughput"): reproduce them at their rate.
 CGAIL_300HZ := env.physics_hz=300 env.armature=0.01
 # All four shipped policies were trained before the small preset's PPO update moved to bf16 where the
@@ -60,6 +60,22 @@ repro-cgail-fidelity: install ## cgail: the fidelity recipe's runs A to E (3 ski
 	E=$(CGAIL_FID)/E/cgail/$$(basename $$A); mkdir -p $$E/checkpoints && cp -r $$D/config.yaml $$D/tb $$E/ && cp $$D/checkpoints/last.pt $$E/checkpoints/ && \
 	$(CHARCTL) train cgail --resume $$E env.skill_fall_weight=0.5 reward.w_track=1.0 train.total_samples=80000000 && \
 	$(CHARCTL) eval $$E --fidelity -k 4 && $(CHARCTL) eval $$E --survival 5 -k 32 && $(CHARCTL) eval $$E --dtw --confusion --switch walk right_kick -k 8
+
+# The whole recipe from the first sample, one run (docs/cgail.md, "Run G"): A's keys plus B's low-style termination,
+# C's pose-error termination, D/E's tracking reward (w_T 1.0) and E's fall-weighted commands.
+CGAIL_FID_FULL := $(CGAIL_FID_RECIPE) reward.low_style_threshold=0.05 reward.low_style_steps=10 reward.pose_error_threshold=0.5 reward.w_track=1.0 env.skill_fall_weight=0.5
+
+.PHONY: repro-cgail-fidelity-one-run repro-cgail-10skill-fidelity
+repro-cgail-fidelity-one-run: install ## cgail: the fidelity recipe from scratch in one run (3 skills, 4e7 samples; ~1.9 h on 2 cores), every kept checkpoint evaluated, the chosen one evaluated in full
+	$(CHARCTL) train cgail scale=small $(CGAIL_FID_FULL) train.total_samples=$(CGAIL_FID_SAMPLES) output_root=$(CGAIL_FID)/G
+	G=$$(ls -d $(CGAIL_FID)/G/cgail/*/ | tail -1); \
+	$(CHARCTL) eval $$G --checkpoints --after 10000000 -k 32 && \
+	$(CHARCTL) eval $$G --fidelity -k 4 && $(CHARCTL) eval $$G --survival 5 -k 32 && $(CHARCTL) eval $$G --dtw --confusion --switch walk right_kick -k 8
+
+repro-cgail-10skill-fidelity: install ## cgail: the fidelity recipe on all ten skills (1.5e8 samples, the paper's budget; ~7 h on 2 cores, resumable with --resume), every kept checkpoint evaluated
+	$(CHARCTL) train cgail scale=small "use_skills=[]" $(CGAIL_FID_FULL) train.total_samples=150000000 output_root=$(CGAIL_FID)/ten
+	T=$$(ls -d $(CGAIL_FID)/ten/cgail/*/ | tail -1); \
+	$(CHARCTL) eval $$T --checkpoints --after 50000000 -k 16 && $(CHARCTL) eval $$T --fidelity -k 4
 
 .PHONY: repro-cgail-tracking-3skill
 repro-cgail-tracking-3skill: install ## cgail: the multi-skill tracking baseline (walk, run, right_kick; command and phase in the state), the fidelity anchor; not yet trained to the end here

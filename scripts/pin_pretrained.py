@@ -1,7 +1,7 @@
 """Write RUN/pin.npz for shipped policies (charctl.experiments.cgail.pins): what each computes on fixed
 states, checked by tests/test_pretrained_pins.py.
 
-    python scripts/pin_pretrained.py pretrained/cgail-3skill [more folders...]
+    python scripts/pin_pretrained.py pretrained/cgail-3skill-fidelity [more folders...]
 """
 
 from __future__ import annotations

@@ -175,7 +175,7 @@ def test_eval_with_a_bad_mode_argument_writes_nothing(tmp_path, options):
 
     out = tmp_path / "eval"
     with pytest.raises(CharctlError, match="unknown skill|-k must be"):
-        evaluate(["pretrained/cgail-3skill"], {**options, "out": str(out)}, [])
+        evaluate(["pretrained/cgail-3skill-fidelity"], {**options, "out": str(out)}, [])
     assert not out.exists()
 
 

@@ -87,7 +87,7 @@ def runs(smoke_run, tmp_path_factory) -> dict[str, Path]:
 
     write_bvh(load_clip("walk"), mocap / "walk.bvh")
     return {
-        "cgail": PRETRAINED / "cgail-3skill",
+        "cgail": PRETRAINED / "cgail-3skill-fidelity",
         "amp": PRETRAINED / "amp-walk",
         "tracking": PRETRAINED / "tracking-walk",
         "srb": smoke_run("srb"),

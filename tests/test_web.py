@@ -34,7 +34,7 @@ from conftest import CHARCTL, REPO, assert_one_line_error, cli_env, run_charctl
 
 WEB = REPO / "web"
 TESTS_WEB = REPO / "tests" / "web"
-RUN = REPO / "pretrained" / "cgail-3skill"
+RUN = REPO / "pretrained" / "cgail-3skill-fidelity"
 CHROMIUM = Path(os.environ.get("CHARCTL_CHROMIUM", "/usr/bin/chromium"))
 NODE = shutil.which("node")
 SCHEDULE = [(0.0, "walk"), (3.0, "run"), (6.0, "right_kick")]
@@ -57,7 +57,7 @@ def node(script: str, *args: str, timeout: float = 180) -> subprocess.CompletedP
 
 @pytest.fixture(scope="module")
 def served(tmp_path_factory):
-    """`charctl export pretrained/cgail-3skill --web DIR --serve` running: (site folder, URL)."""
+    """`charctl export pretrained/cgail-3skill-fidelity --web DIR --serve` running: (site folder, URL)."""
     site = tmp_path_factory.mktemp("web") / "site"
     exe = [str(CHARCTL)] if CHARCTL.exists() else [sys.executable, "-c", "from charctl.cli import main; main()"]
     proc = subprocess.Popen(
@@ -265,7 +265,9 @@ def test_onnx_graph_in_onnxruntime_web_equals_the_python_features(served, traine
     print(f"ONNX graph (onnxruntime-web, Node) vs Python features on {B} recorded states: {err}")
     assert err["state"] < 1e-5 and err["obs"] < 1e-5 and err["command"] < 1e-12, err
     with torch.no_grad():
-        _, logits = trained.agent.disc(torch.as_tensor(want["pair"], dtype=torch.float32))
+        # the command blend only selects the style logit (a per-skill style head); the class logits ignore it
+        cond = torch.as_tensor(want["command"], dtype=torch.float32)
+        _, logits = trained.agent.disc(torch.as_tensor(want["pair"], dtype=torch.float32), cond=cond)
     probs = F.softmax(logits, -1).numpy()
     assert np.abs(out["probs"] - probs).max() < 1e-5
     assert np.abs(out["ctrl"] - want["action"]).max() < 1e-5  # float32 networks: kernels differ in rounding only
