@@ -73,7 +73,7 @@ repro-cgail-fidelity-one-run: install ## cgail: the fidelity recipe from scratch
 	$(CHARCTL) eval $$G --fidelity -k 4 && $(CHARCTL) eval $$G --survival 5 -k 32 && $(CHARCTL) eval $$G --dtw --confusion --switch walk right_kick -k 8
 
 repro-cgail-10skill-fidelity: install ## cgail: the fidelity recipe on all ten skills (1.5e8 samples, the paper's budget; ~7 h on 2 cores, resumable with --resume), every kept checkpoint evaluated
-	$(CHARCTL) train cgail scale=small "use_skills=[]" $(CGAIL_FID_FULL) train.total_samples=150000000 output_root=$(CGAIL_FID)/ten
+	$(CHARCTL) train cgail scale=small "use_skills=[]" $(CGAIL_FID_FULL) train.fidelity_every=2000000 train.total_samples=150000000 output_root=$(CGAIL_FID)/ten
 	T=$$(ls -d $(CGAIL_FID)/ten/cgail/*/ | tail -1); \
 	$(CHARCTL) eval $$T --checkpoints --after 50000000 -k 16 && $(CHARCTL) eval $$T --fidelity -k 4
 

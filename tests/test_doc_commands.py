@@ -241,7 +241,8 @@ RESUME_TOTAL = {"cgail": 1024, "srb": 4096}  # resuming a finished smoke run nee
 
 def smoke_argv(cmd: DocCommand, runs, cwd: Path) -> list[str]:
     """The command at smoke scale: placeholders -> smoke runs (a fresh copy for --resume), optional
-    `[...]` parts dropped, `--seconds` / `-k` shrunk to 1, scale=smoke and output_root appended."""
+    `[...]` parts dropped, `--seconds` / `-k` shrunk to 1, `--after` to 0 (a smoke run keeps its checkpoints from
+    its first samples), scale=smoke and output_root appended."""
     text = re.sub(r"(?<=\s)\[[^\]]*\]", "", _named_placeholders(cmd.text))  # optional "[-k 4]", "[RUN ...]"
     argv = shlex.split(text)[1:]
     resume = "--resume" in argv
@@ -262,6 +263,9 @@ def smoke_argv(cmd: DocCommand, runs, cwd: Path) -> list[str]:
             seen_runs += 1
         elif tok in ("--seconds", "-k", "--episodes"):
             out += [tok, "1"]
+            skip_next = True
+        elif tok == "--after":
+            out += [tok, "0"]
             skip_next = True
         elif tok.startswith("train.total_samples="):
             out.append("train.total_samples=8192")
