@@ -2,9 +2,11 @@
 
 The single definition of what the policy sees, what the discriminator sees, the tracking and goal
 rewards and when an episode ends, as batched torch ops that run on the simulation's device
-without a host round trip. The C (numpy) backend keeps `features.py` / `env.py` (numpy is faster
-there: no tensor conversions around MuJoCo's numpy views); `tests/test_gpu_path.py` holds the two
-implementations equal on the same inputs (float64: to 1e-12; float32: to float32 rounding).
+without a host round trip. The C (numpy) backend keeps `features.py` / `env.py`: numpy is faster
+there even over copy-free `torch.from_numpy` views of MuJoCo's arrays, because torch's per-call overhead
+dominates at these batch sizes (docs/cgail.md, "Throughput (CPU)"; `scripts/bench_cgail_torch_cpu.py`).
+`tests/test_gpu_path.py` holds the two implementations equal on the same inputs (float64: to 1e-12;
+float32: to float32 rounding).
 
 Frames and units as in `features.py`: heading frame (the root's yaw about +y removed: +x facing,
 y up, +z the character's right), metres, m/s, rad/s; quaternions xyzw.
