@@ -143,7 +143,9 @@ def test_bad_episode_count_is_one_line_error_before_anything_is_written(tmp_path
 
     out = tmp_path / "fid"
     with pytest.raises(CharctlError, match="-k"):
-        eval_command([str(REPO / "pretrained" / "cgail-3skill-fidelity")], {"fidelity": True, "episodes": 0, "out": out})
+        eval_command(
+            [str(REPO / "pretrained" / "cgail-3skill-fidelity")], {"fidelity": True, "episodes": 0, "out": out}
+        )
     assert not out.exists()
 
 
