@@ -41,9 +41,6 @@ def run_tune(setup: TuneSetup) -> tuple[list[TrialRecord], TrialRecord | None]:
     from charctl.launch.table import JobTable
 
     tune = import_tune()
-    from ray.tune.schedulers import ASHAScheduler
-    from ray.tune.search.basic_variant import BasicVariantGenerator
-
     out = Path(setup.out_dir)
     labels = ["(not sampled yet)"] * setup.settings.trials
     stop = _StopRequest()
@@ -56,52 +53,67 @@ def run_tune(setup: TuneSetup) -> tuple[list[TrialRecord], TrialRecord | None]:
         columns = (setup.metric, "reports")
         with JobTable(f"tune {setup.experiment}", labels, extra_columns=columns, final_table=False) as table:
             view = _View(setup, table, stop)
-            trainable = tune.with_resources(
-                tune.with_parameters(trial_class(), setup=setup),
-                {"cpu": setup.settings.cpus, "gpu": setup.settings.gpus},
-            )
-            tuner = tune.Tuner(
-                trainable,
-                param_space={d.name: d.to_tune() for d in setup.dims},
-                tune_config=tune.TuneConfig(
-                    metric=setup.metric,
-                    mode=setup.mode,
-                    num_samples=setup.settings.trials,
-                    scheduler=ASHAScheduler(
-                        max_t=setup.settings.max_reports or BIG_T,
-                        grace_period=setup.settings.grace_period,
-                        reduction_factor=4,
-                    ),
-                    search_alg=BasicVariantGenerator(random_state=setup.settings.seed),
-                    trial_dirname_creator=_trial_dirname,
-                ),
-                run_config=tune.RunConfig(
-                    name="ray",
-                    storage_path=str(out),
-                    verbose=0,
-                    callbacks=[_callback(view)],
-                    failure_config=tune.FailureConfig(max_failures=0),
-                    checkpoint_config=tune.CheckpointConfig(checkpoint_frequency=0, checkpoint_at_end=False),
-                ),
-            )
+            tuner = _make_tuner(tune, setup, view, out)
             with stop.installed():
                 try:
                     tuner.fit()
                 except KeyboardInterrupt:  # a second Ctrl-C: Tune gave up on the graceful stop
                     stop.signum = stop.signum or int(signal.SIGINT)
-            for trial_id, rec in view.records.items():  # states Tune settled after the last callback
-                if rec.state in ("pending", "running"):
-                    trial = view.trials[trial_id]
-                    if trial.status == "ERROR":
-                        view.errored(trial)
-                    elif trial.status == "TERMINATED":
-                        view.completed(trial)
+            _settle_final_states(view)
     wait_for_children(setup, list(view.records))
     records = sorted(view.records.values(), key=lambda r: r.number)
     best = write_outputs(setup, records)
     if stop.signum:
         raise Interrupted(f"interrupted: the trials so far, with their checkpoints, are in {out}", signum=stop.signum)
     return records, best
+
+
+def _make_tuner(tune, setup: TuneSetup, view: _View, out: Path):
+    """The `tune.Tuner`: random search (seeded) with ASHA, one CharctlTrial per sample, Tune's records
+    under `out/ray/`, no Tune checkpoints (each child run writes its own) and no retries."""
+    from ray.tune.schedulers import ASHAScheduler
+    from ray.tune.search.basic_variant import BasicVariantGenerator
+
+    trainable = tune.with_resources(
+        tune.with_parameters(trial_class(), setup=setup),
+        {"cpu": setup.settings.cpus, "gpu": setup.settings.gpus},
+    )
+    return tune.Tuner(
+        trainable,
+        param_space={d.name: d.to_tune() for d in setup.dims},
+        tune_config=tune.TuneConfig(
+            metric=setup.metric,
+            mode=setup.mode,
+            num_samples=setup.settings.trials,
+            scheduler=ASHAScheduler(
+                max_t=setup.settings.max_reports or BIG_T,
+                grace_period=setup.settings.grace_period,
+                reduction_factor=4,
+            ),
+            search_alg=BasicVariantGenerator(random_state=setup.settings.seed),
+            trial_dirname_creator=_trial_dirname,
+        ),
+        run_config=tune.RunConfig(
+            name="ray",
+            storage_path=str(out),
+            verbose=0,
+            callbacks=[_callback(view)],
+            failure_config=tune.FailureConfig(max_failures=0),
+            checkpoint_config=tune.CheckpointConfig(checkpoint_frequency=0, checkpoint_at_end=False),
+        ),
+    )
+
+
+def _settle_final_states(view: _View) -> None:
+    """Record the states Tune settled after the last callback (errored or terminated trials still
+    shown as pending/running)."""
+    for trial_id, rec in view.records.items():
+        if rec.state in ("pending", "running"):
+            trial = view.trials[trial_id]
+            if trial.status == "ERROR":
+                view.errored(trial)
+            elif trial.status == "TERMINATED":
+                view.completed(trial)
 
 
 def make_out_dir(output_root: str | Path, experiment: str) -> Path:

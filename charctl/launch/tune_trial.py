@@ -24,7 +24,10 @@ from charctl.launch.tune_setup import TrialFailed, TuneSetup
 
 
 def trial_class():
-    """The Ray Tune Trainable (a function so that importing this module does not import Ray Tune)."""
+    """The Ray Tune Trainable (a function so that importing this module does not import Ray Tune).
+
+    It is long because the class must be defined inside it, after the lazy `from ray import tune`;
+    its methods are each short."""
     from ray import tune
 
     class CharctlTrial(tune.Trainable):

@@ -109,6 +109,26 @@ def read_bvh(path: str | Path) -> BvhMotion:
 def _parse(tok: list[str], src: str) -> BvhMotion:
     if not tok or tok[0] != "HIERARCHY":
         raise CharctlError(f"{src}: malformed BVH (does not start with HIERARCHY)")
+    names, parents, offsets, channels, end_sites, i = _parse_hierarchy(tok, src)
+    if not names:
+        raise CharctlError(f"{src}: malformed BVH (no joints)")
+    values, frame_time = _parse_motion(tok, i, src, sum(len(c) for c in channels))
+    # re-map end-site parent markers (-2 placeholders never reach `parents`)
+    return BvhMotion(
+        names,
+        np.array(parents),
+        np.array(offsets),
+        channels,
+        values,
+        frame_time,
+        end_sites,
+        src,
+    )
+
+
+def _parse_hierarchy(tok: list[str], src: str) -> tuple[list, list, list, list, dict, int]:
+    """The HIERARCHY section from token 1 up to MOTION: joint names, parent indices (-1: root),
+    offsets (file units), channel names, end-site offsets by joint index, and MOTION's token index."""
     names, parents, offsets, channels, end_sites = [], [], [], [], {}
     stack: list[int] = []
     i = 1
@@ -144,31 +164,23 @@ def _parse(tok: list[str], src: str) -> BvhMotion:
             i += 2 + n
         else:
             raise CharctlError(f"{src}: malformed BVH (unexpected token {t!r} in HIERARCHY)")
-    if not names:
-        raise CharctlError(f"{src}: malformed BVH (no joints)")
+    return names, parents, offsets, channels, end_sites, i
+
+
+def _parse_motion(tok: list[str], i: int, src: str, width: int) -> tuple[np.ndarray, float]:
+    """The MOTION section at token `i`: the (frames, width) channel values and the frame time (s)."""
     if tok[i + 1] != "Frames:" or tok[i + 3] != "Frame" or tok[i + 4] != "Time:":
         raise CharctlError(f"{src}: malformed BVH (MOTION header must give 'Frames:' and 'Frame Time:')")
     n_frames = int(tok[i + 2])
     frame_time = float(tok[i + 5])
     values = np.array([float(x) for x in tok[i + 6 :]])
-    width = sum(len(c) for c in channels)
     if values.size != n_frames * width:
         raise CharctlError(
             f"{src}: malformed BVH ({values.size} motion values, expected {n_frames} frames x {width} channels)"
         )
     if frame_time <= 0 or not np.all(np.isfinite(values)):
         raise CharctlError(f"{src}: malformed BVH (non-positive frame time or non-finite values)")
-    # re-map end-site parent markers (-2 placeholders never reach `parents`)
-    return BvhMotion(
-        names,
-        np.array(parents),
-        np.array(offsets),
-        channels,
-        values.reshape(n_frames, width),
-        frame_time,
-        end_sites,
-        src,
-    )
+    return values.reshape(n_frames, width), frame_time
 
 
 def read_bvh_as_clip(path: str | Path) -> Clip:

@@ -215,57 +215,83 @@ def write_filmstrip(r: Retargeted, path: str | Path, n: int = 8) -> Path:
     T = clip.num_frames
     frames = np.linspace(0, T - 1, n).round().astype(int)
     pos, rot = clip.fk
-    sk = clip.skeleton
     fig, axes = new_figure(4, n, figsize=(1.7 * n, 7.6), squeeze=False)
     heading = R.heading_quat(-R.yaw_about_y(clip.local_rot[:, 0]))  # turn each frame to face +x
     keep = _subtree(src.parents, src.jmap.joints["root"])
     names = ["source (scaled), side", "humanoid, side", "source (scaled), front", "humanoid, front"]
     for c, t in enumerate(frames):
-        centre = pos[t, 0] * np.array([1.0, 0.0, 1.0])
-        turn = np.broadcast_to(heading[t], (1, 4))
-
-        def view(p: np.ndarray, front: bool, turn=turn, centre=centre) -> tuple[np.ndarray, np.ndarray]:
-            q = R.rotate(np.broadcast_to(turn, p.shape[:-1] + (4,)), p - centre)
-            return (q[..., 2], q[..., 1]) if front else (q[..., 0], q[..., 1])
-
+        view = _frame_view(heading[t], pos[t, 0] * np.array([1.0, 0.0, 1.0]))
         for row in range(4):
             ax = axes[row][c]
             front = row >= 2
             if row % 2 == 0:  # source skeleton (the mapped root's subtree)
-                P = src.pos[t]
-                for j, p in enumerate(src.parents):
-                    if p >= 0 and keep[j] and keep[p]:
-                        x, y = view(np.stack([P[p], P[j]]), front)
-                        ax.plot(x, y, color=_color(src.names[j]), lw=1.2)
-                for j, e in src.end_pos.items():
-                    if not keep[j]:
-                        continue
-                    x, y = view(np.stack([P[j], e[t]]), front)
-                    ax.plot(x, y, color=_color(src.names[j]), lw=0.8, alpha=0.6)
-            else:  # humanoid
-                for b in range(1, sk.num_bodies):
-                    x, y = view(np.stack([pos[t, sk.parents[b]], pos[t, b]]), front)
-                    ax.plot(x, y, color=_color(sk.names[b]), lw=2.2)
-                for b, e in _HUMANOID_ENDS.items():
-                    i = sk.index(b)
-                    end = pos[t, i] + R.rotate(rot[t, i], np.array(e))
-                    x, y = view(np.stack([pos[t, i], end]), front)
-                    ax.plot(x, y, color=_color(b), lw=2.2)
-                for e in END_EFFECTORS:
-                    x, y = view(r.targets[e][t][None], front)
-                    ax.plot(x, y, "k+", ms=6, mew=1.0)
-            ax.axhline(0.0, color="#8a6d3b", lw=1.0)
-            ax.set_xlim(-0.9, 0.9)
-            ax.set_ylim(-0.05, 1.85)
-            ax.set_aspect("equal")
-            ax.set_xticks([])
-            ax.set_yticks([])
-            if c == 0:
-                ax.set_ylabel(names[row], fontsize=7)
-            if row == 0:
-                ax.set_title(f"t = {t / clip.fps:.2f} s", fontsize=8)
+                _draw_source(ax, src, keep, t, view, front)
+            else:
+                _draw_humanoid(ax, r, pos, rot, t, view, front)
+            _style_panel(ax, names[row] if c == 0 else None, f"t = {t / clip.fps:.2f} s" if row == 0 else None)
     fig.suptitle(f"{Path(src.path).name} ({src.jmap.name}) -> humanoid   (+: IK targets of feet and hands)", fontsize=9)
     return save_figure(fig, path, dpi=100)
+
+
+def _frame_view(heading: np.ndarray, centre: np.ndarray):
+    """`view(p, front) -> (x, y)`: points `p` (..., 3; m, world) relative to the ground point `centre`,
+    turned by the frame's `heading` quaternion to face +x, seen from the side (x, y) or front (z, y)."""
+    from charctl.motion import rotations as R
+
+    turn = np.broadcast_to(heading, (1, 4))
+
+    def view(p: np.ndarray, front: bool) -> tuple[np.ndarray, np.ndarray]:
+        q = R.rotate(np.broadcast_to(turn, p.shape[:-1] + (4,)), p - centre)
+        return (q[..., 2], q[..., 1]) if front else (q[..., 0], q[..., 1])
+
+    return view
+
+
+def _draw_source(ax, src, keep: np.ndarray, t: int, view, front: bool) -> None:
+    """The scaled source skeleton's bones (the `keep` joints) and end sites at frame `t`."""
+    P = src.pos[t]
+    for j, p in enumerate(src.parents):
+        if p >= 0 and keep[j] and keep[p]:
+            x, y = view(np.stack([P[p], P[j]]), front)
+            ax.plot(x, y, color=_color(src.names[j]), lw=1.2)
+    for j, e in src.end_pos.items():
+        if not keep[j]:
+            continue
+        x, y = view(np.stack([P[j], e[t]]), front)
+        ax.plot(x, y, color=_color(src.names[j]), lw=0.8, alpha=0.6)
+
+
+def _draw_humanoid(ax, r: Retargeted, pos: np.ndarray, rot: np.ndarray, t: int, view, front: bool) -> None:
+    """The humanoid's bones (world positions `pos`, rotations `rot` from FK), head and feet stubs, and
+    the IK targets of the end effectors as crosses, at frame `t`."""
+    from charctl.motion import rotations as R
+
+    sk = r.clip.skeleton
+    for b in range(1, sk.num_bodies):
+        x, y = view(np.stack([pos[t, sk.parents[b]], pos[t, b]]), front)
+        ax.plot(x, y, color=_color(sk.names[b]), lw=2.2)
+    for b, e in _HUMANOID_ENDS.items():
+        i = sk.index(b)
+        end = pos[t, i] + R.rotate(rot[t, i], np.array(e))
+        x, y = view(np.stack([pos[t, i], end]), front)
+        ax.plot(x, y, color=_color(b), lw=2.2)
+    for e in END_EFFECTORS:
+        x, y = view(r.targets[e][t][None], front)
+        ax.plot(x, y, "k+", ms=6, mew=1.0)
+
+
+def _style_panel(ax, ylabel: str | None, title: str | None) -> None:
+    """The ground line, the fixed 1.8 m x 1.9 m window without ticks, and the row/column labels."""
+    ax.axhline(0.0, color="#8a6d3b", lw=1.0)
+    ax.set_xlim(-0.9, 0.9)
+    ax.set_ylim(-0.05, 1.85)
+    ax.set_aspect("equal")
+    ax.set_xticks([])
+    ax.set_yticks([])
+    if ylabel is not None:
+        ax.set_ylabel(ylabel, fontsize=7)
+    if title is not None:
+        ax.set_title(title, fontsize=8)
 
 
 def _subtree(parents: np.ndarray, root: int) -> np.ndarray:

@@ -200,11 +200,30 @@ class PPO:
         # The observation normaliser is frozen during the update: normalise the whole batch once.
         inputs = self.model.network_input(data["obs"], data["cond"] if self.model.cond_dim else None)
         low = {"fp32": None, "bf16": torch.bfloat16}[self.precision]
+        start_policy = self._start_policy(data, inputs, low, stale_behaviour)
+        weights = start_policy[3]
+        for _ in range(cfg.epochs):
+            perm = torch.randperm(n, generator=self.generator).to(data["obs"].device)
+            for start in range(0, n - mb + 1, mb):
+                idx = perm[start : start + mb]
+                for k, v in self._minibatch_step(data, inputs, idx, low, *start_policy).items():
+                    sums[k] = sums.get(k, 0.0) + v.detach().double()
+                steps += 1
+        stats = {f"losses/{k}": float(v) / max(steps, 1) for k, v in sums.items()}
+        stats["train/ppo_lr"] = self.optimizer.param_groups[0]["lr"]
+        if weights is not None:
+            stats["losses/behaviour_weight"] = float(weights.mean())
+        return stats
+
+    def _start_policy(self, data: dict, inputs: torch.Tensor, low: torch.dtype | None, stale_behaviour: bool) -> tuple:
+        """The policy at the update's start, in the update's precision `low` (None: fp32), where it is needed:
+        (old_mean, old_log_std, old_logp, weights). old_logp is the storage's behaviour log-probs unless
+        recomputed (low precision or stale behaviour, so the ratio starts at exactly 1); weights are the
+        decoupled objective's behaviour weights, or None."""
         old_logp = data["log_probs"]
-        adaptive = cfg.desired_kl > 0
         old_mean = old_log_std = None
         weights = None
-        if low is not None or adaptive or stale_behaviour:  # the policy at the update's start, in its precision
+        if low is not None or self.cfg.desired_kl > 0 or stale_behaviour:
             with torch.no_grad():
                 old_mean, old_log_std = self.model.heads(inputs, low)[0], self.model.log_std.detach().clone()
                 if low is not None or stale_behaviour:  # the ratio starts at exactly 1
@@ -213,43 +232,48 @@ class PPO:
                     prox_mean = old_mean if low is None else self.model.heads(inputs)[0]
                     prox_logp = gaussian_log_prob(data["actions"], prox_mean, old_log_std)
                     weights = behaviour_weights(prox_logp, data["log_probs"])
-        for _ in range(cfg.epochs):
-            perm = torch.randperm(n, generator=self.generator).to(data["obs"].device)
-            for start in range(0, n - mb + 1, mb):
-                idx = perm[start : start + mb]
-                x = inputs[idx]
-                adv = data["advantages"][idx]
-                if cfg.normalize_advantages and adv.numel() > 1:
-                    adv = (adv - adv.mean()) / (adv.std() + 1e-8)
-                mean, values = self.model.heads(x, low)
-                new_logp = gaussian_log_prob(data["actions"][idx], mean, self.model.log_std)
-                if adaptive:
-                    self._adapt_lr(old_mean[idx], old_log_std, mean.detach(), self.model.log_std.detach())
-                losses = ppo_losses(
-                    new_logp,
-                    old_logp[idx],
-                    adv,
-                    values,
-                    data["values"][idx],
-                    data["returns"][idx],
-                    cfg.clip,
-                    cfg.value_clip,
-                    None if weights is None else weights[idx],
-                )
-                entropy = gaussian_entropy(self.model.log_std)
-                loss = losses["policy"] + cfg.value_coef * losses["value"] - cfg.entropy_coef * entropy
-                self.optimizer.zero_grad(set_to_none=True)
-                loss.backward()
-                nn.utils.clip_grad_norm_(self.model.parameters(), cfg.max_grad_norm)
-                self.optimizer.step()
-                for k, v in {**losses, "entropy": entropy}.items():
-                    sums[k] = sums.get(k, 0.0) + v.detach().double()
-                steps += 1
-        stats = {f"losses/{k}": float(v) / max(steps, 1) for k, v in sums.items()}
-        stats["train/ppo_lr"] = self.optimizer.param_groups[0]["lr"]
-        if weights is not None:
-            stats["losses/behaviour_weight"] = float(weights.mean())
-        return stats
+        return old_mean, old_log_std, old_logp, weights
+
+    def _minibatch_step(
+        self,
+        data: dict,
+        inputs: torch.Tensor,
+        idx: torch.Tensor,
+        low: torch.dtype | None,
+        old_mean: torch.Tensor | None,
+        old_log_std: torch.Tensor | None,
+        old_logp: torch.Tensor,
+        weights: torch.Tensor | None,
+    ) -> dict[str, torch.Tensor]:
+        """One gradient step on the minibatch `idx` (KL-adapting the learning rate first when
+        `desired_kl` > 0); returns its losses and the policy entropy."""
+        cfg = self.cfg
+        x = inputs[idx]
+        adv = data["advantages"][idx]
+        if cfg.normalize_advantages and adv.numel() > 1:
+            adv = (adv - adv.mean()) / (adv.std() + 1e-8)
+        mean, values = self.model.heads(x, low)
+        new_logp = gaussian_log_prob(data["actions"][idx], mean, self.model.log_std)
+        if cfg.desired_kl > 0:
+            self._adapt_lr(old_mean[idx], old_log_std, mean.detach(), self.model.log_std.detach())
+        losses = ppo_losses(
+            new_logp,
+            old_logp[idx],
+            adv,
+            values,
+            data["values"][idx],
+            data["returns"][idx],
+            cfg.clip,
+            cfg.value_clip,
+            None if weights is None else weights[idx],
+        )
+        entropy = gaussian_entropy(self.model.log_std)
+        loss = losses["policy"] + cfg.value_coef * losses["value"] - cfg.entropy_coef * entropy
+        self.optimizer.zero_grad(set_to_none=True)
+        loss.backward()
+        nn.utils.clip_grad_norm_(self.model.parameters(), cfg.max_grad_norm)
+        self.optimizer.step()
+        return {**losses, "entropy": entropy}
 
     def _adapt_lr(self, old_mean, old_log_std, mean, log_std) -> None:
         """One step of the KL-targeting schedule on this minibatch (reads one number to the host)."""

@@ -216,16 +216,11 @@ def crossed_multiple(samples: int, step: int, every: int) -> bool:
 def run_on_policy(learner: Learner, run, settings: RunnerSettings) -> dict:
     """Train `learner` until its budget (`settings.total_samples` or `total_iterations`), writing into
     `run` (charctl.runs.Run)."""
-    from charctl.checkpoints import kept_checkpoint_name
     from charctl.progress import TrainingProgress
     from charctl.signals import StopFlag
 
     if run.resumed:
-        state = run.load_checkpoint(learner.signature())
-        learner.load_state_dict(state)
-        note = restore_rng_states(state)
-        if note:
-            print(note, flush=True)
+        _resume(learner, run)
     total = settings.total
     if settings.done(learner) >= total:
         key = settings.budget_key
@@ -242,32 +237,18 @@ def run_on_policy(learner: Learner, run, settings: RunnerSettings) -> dict:
             learner.iteration += 1
             learner.samples += step
             _stop_if_diverged(learner, run, stats, settings.iteration_name)
-            warning = None
-            if settings.track_blowups:
-                warning = blowups.update(stats.get("sim/unstable_resets", 0.0), step)
-                stats["sim/blowup_rate"] = blowups.rate
-            if warning:
-                print(f"\n{warning}", flush=True)
+            _watch_blowups(stats, blowups, settings, step)
             if learner.iteration % settings.log_every == 0:
                 run.log_scalars(stats, learner.samples)
             fields = learner.progress_fields(stats)
             if blowups.active:
                 fields["BLOWUPS"] = f"{100 * blowups.rate:.1f}%"
             bar.update(step if settings.bar_unit == "samples" else 1, **fields)
-            names = ["last.pt"] if learner.iteration % settings.checkpoint_every == 0 or stop.requested else []
-            if crossed_multiple(learner.samples, step, settings.keep_every):
-                names.append(kept_checkpoint_name(learner.samples))
-            if names:
-                state = with_rng_states(learner.state_dict())  # built once for both files
-                for name in names:
-                    run.save_checkpoint(state, learner.signature(), name=name)
+            _save_due_checkpoints(learner, run, settings, step, stop.requested)
             if stop.requested:
                 break
     if stop.requested:
-        # metrics.json describes the run as it stands (replacing e.g. a diverged entry of an earlier segment)
-        summary = learner.summary(stats) if learner.iteration > iterations_at_start else {}
-        run.write_metrics({"interrupted": True, "iterations": learner.iteration, "samples": learner.samples, **summary})
-        run.close()
+        _write_interrupted(learner, run, stats, iterations_at_start)
         message = f"interrupted at {settings.at(learner)}: checkpoint written; continue with --resume {run.dir}"
         raise stop.interrupted(message)
     run.save_checkpoint(with_rng_states(learner.state_dict()), learner.signature())
@@ -281,3 +262,45 @@ def run_on_policy(learner: Learner, run, settings: RunnerSettings) -> dict:
     }
     run.write_metrics(metrics)
     return metrics
+
+
+def _resume(learner: Learner, run) -> None:
+    """Load the run's last checkpoint into `learner` and restore the RNG states saved with it."""
+    state = run.load_checkpoint(learner.signature())
+    learner.load_state_dict(state)
+    note = restore_rng_states(state)
+    if note:
+        print(note, flush=True)
+
+
+def _watch_blowups(stats: dict, blowups: BlowupMonitor, settings: RunnerSettings, step: int) -> None:
+    """With `settings.track_blowups`: feed the iteration's unstable resets to `blowups`, add its rate to
+    `stats` (sim/blowup_rate) and print its warning, if any."""
+    warning = None
+    if settings.track_blowups:
+        warning = blowups.update(stats.get("sim/unstable_resets", 0.0), step)
+        stats["sim/blowup_rate"] = blowups.rate
+    if warning:
+        print(f"\n{warning}", flush=True)
+
+
+def _save_due_checkpoints(learner: Learner, run, settings: RunnerSettings, step: int, stopping: bool) -> None:
+    """last.pt every `checkpoint_every` iterations or when stopping, and a kept checkpoint each time the
+    sample count passes a multiple of `keep_every`; one state (with the RNG states) for both files."""
+    from charctl.checkpoints import kept_checkpoint_name
+
+    names = ["last.pt"] if learner.iteration % settings.checkpoint_every == 0 or stopping else []
+    if crossed_multiple(learner.samples, step, settings.keep_every):
+        names.append(kept_checkpoint_name(learner.samples))
+    if names:
+        state = with_rng_states(learner.state_dict())  # built once for both files
+        for name in names:
+            run.save_checkpoint(state, learner.signature(), name=name)
+
+
+def _write_interrupted(learner: Learner, run, stats: dict, iterations_at_start: int) -> None:
+    """metrics.json of a stopped run, then close the run."""
+    # metrics.json describes the run as it stands (replacing e.g. a diverged entry of an earlier segment)
+    summary = learner.summary(stats) if learner.iteration > iterations_at_start else {}
+    run.write_metrics({"interrupted": True, "iterations": learner.iteration, "samples": learner.samples, **summary})
+    run.close()

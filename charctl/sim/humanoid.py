@@ -102,57 +102,79 @@ def build_mjcf(
         children[int(skel.parents[b])].append(b)
     lines: list[str] = []
     actuators: list[str] = []
+    _emit_body(skel, children, 0, 0, lines, actuators)
+    return _mjcf_document("\n".join(lines), "\n    ".join(actuators), physics_hz, friction, armature, floor_size)
 
-    def geom_xml(b: int) -> str:
-        g = skel.geoms[b]
-        m = skel.masses[b]
-        p = np.array(g.pos)
-        common = f'name="{skel.names[b]}" mass="{m}" rgba="{_color(skel.names[b])}"'
-        if g.kind == "sphere":
-            return f'<geom type="sphere" size="{g.size[0]:.5f}" pos="{p[0]:.5f} {p[1]:.5f} {p[2]:.5f}" {common}/>'
-        if g.kind == "capsule":
-            r, half = g.size
-            a, c = p + [0, half, 0], p - [0, half, 0]
-            return (
-                f'<geom type="capsule" size="{r:.5f}" '
-                f'fromto="{a[0]:.5f} {a[1]:.5f} {a[2]:.5f} {c[0]:.5f} {c[1]:.5f} {c[2]:.5f}" {common}/>'
-            )
-        h = g.size
+
+def _geom_xml(skel: Skeleton, b: int) -> str:
+    """The collision/visual `<geom>` of body `b` (skeleton frame, metres; a capsule's axis along y)."""
+    g = skel.geoms[b]
+    m = skel.masses[b]
+    p = np.array(g.pos)
+    common = f'name="{skel.names[b]}" mass="{m}" rgba="{_color(skel.names[b])}"'
+    if g.kind == "sphere":
+        return f'<geom type="sphere" size="{g.size[0]:.5f}" pos="{p[0]:.5f} {p[1]:.5f} {p[2]:.5f}" {common}/>'
+    if g.kind == "capsule":
+        r, half = g.size
+        a, c = p + [0, half, 0], p - [0, half, 0]
         return (
-            f'<geom type="box" size="{h[0]:.5f} {h[1]:.5f} {h[2]:.5f}" '
-            f'pos="{p[0]:.5f} {p[1]:.5f} {p[2]:.5f}" {common}/>'
+            f'<geom type="capsule" size="{r:.5f}" '
+            f'fromto="{a[0]:.5f} {a[1]:.5f} {a[2]:.5f} {c[0]:.5f} {c[1]:.5f} {c[2]:.5f}" {common}/>'
         )
+    h = g.size
+    return f'<geom type="box" size="{h[0]:.5f} {h[1]:.5f} {h[2]:.5f}" pos="{p[0]:.5f} {p[1]:.5f} {p[2]:.5f}" {common}/>'
 
-    def emit(b: int, depth: int) -> None:
-        name = skel.names[b]
-        pad = "  " * (depth + 2)
-        off = skel.offsets[b] if b > 0 else np.array([0.0, 0.9, 0.0])
-        lines.append(f'{pad}<body name="{name}" pos="{off[0]:.6f} {off[1]:.6f} {off[2]:.6f}">')
-        if b == 0:
-            lines.append(f'{pad}  <freejoint name="root"/>')
-            lines.append(f'{pad}  <camera name="side" mode="trackcom" pos="0 0.35 2.8" xyaxes="1 0 0 0 0.99 -0.14"/>')
-            lines.append(f'{pad}  <camera name="front" mode="trackcom" pos="2.8 0.35 0" xyaxes="0 0 -1 -0.14 0.99 0"/>')
-        elif not name.endswith("wrist"):
-            kp, kd, lim = PD_GAINS[_kind(name)]
-            if name in HINGE_JOINTS:
-                lo, hi = HINGE_LIMITS[_kind(name)]
-                lines.append(
-                    f'{pad}  <joint name="{name}" type="hinge" axis="0 0 1" range="{lo} {hi}" limited="true"/>'
-                )
-                actuators.append(_actuator(name, kp, kd, lim))
-            else:
-                for axis in EULER_ORDER[name]:
-                    jn = f"{name}_{axis.lower()}"
-                    lines.append(f'{pad}  <joint name="{jn}" type="hinge" axis="{_AXES[axis]}"/>')
-                    actuators.append(_actuator(jn, kp, kd, lim))
-        lines.append(f"{pad}  {geom_xml(b)}")
-        for c in children[b]:
-            emit(c, depth + 1)
-        lines.append(f"{pad}</body>")
 
-    emit(0, 0)
-    body = "\n".join(lines)
-    acts = "\n    ".join(actuators)
+def _root_joint_xml(pad: str) -> list[str]:
+    """The root's free joint and the two COM-tracking cameras (side: looking along -z; front: along -x)."""
+    return [
+        f'{pad}  <freejoint name="root"/>',
+        f'{pad}  <camera name="side" mode="trackcom" pos="0 0.35 2.8" xyaxes="1 0 0 0 0.99 -0.14"/>',
+        f'{pad}  <camera name="front" mode="trackcom" pos="2.8 0.35 0" xyaxes="0 0 -1 -0.14 0.99 0"/>',
+    ]
+
+
+def _actuated_joint_xml(name: str, pad: str, lines: list[str], actuators: list[str]) -> None:
+    """Append body `name`'s hinge(s) to `lines` and their PD position actuators to `actuators`:
+    one limited hinge about z (radians) for knees/elbows, else a chain of three in EULER_ORDER."""
+    kp, kd, lim = PD_GAINS[_kind(name)]
+    if name in HINGE_JOINTS:
+        lo, hi = HINGE_LIMITS[_kind(name)]
+        lines.append(f'{pad}  <joint name="{name}" type="hinge" axis="0 0 1" range="{lo} {hi}" limited="true"/>')
+        actuators.append(_actuator(name, kp, kd, lim))
+    else:
+        for axis in EULER_ORDER[name]:
+            jn = f"{name}_{axis.lower()}"
+            lines.append(f'{pad}  <joint name="{jn}" type="hinge" axis="{_AXES[axis]}"/>')
+            actuators.append(_actuator(jn, kp, kd, lim))
+
+
+def _emit_body(
+    skel: Skeleton,
+    children: dict[int, list[int]],
+    b: int,
+    depth: int,
+    lines: list[str],
+    actuators: list[str],
+) -> None:
+    """Append body `b`'s `<body>` element and, depth-first, its descendants' to `lines`; the root sits
+    0.9 m above the ground, every other body at its skeleton offset (metres) from its parent."""
+    name = skel.names[b]
+    pad = "  " * (depth + 2)
+    off = skel.offsets[b] if b > 0 else np.array([0.0, 0.9, 0.0])
+    lines.append(f'{pad}<body name="{name}" pos="{off[0]:.6f} {off[1]:.6f} {off[2]:.6f}">')
+    if b == 0:
+        lines.extend(_root_joint_xml(pad))
+    elif not name.endswith("wrist"):
+        _actuated_joint_xml(name, pad, lines, actuators)
+    lines.append(f"{pad}  {_geom_xml(skel, b)}")
+    for c in children[b]:
+        _emit_body(skel, children, c, depth + 1, lines, actuators)
+    lines.append(f"{pad}</body>")
+
+
+def _mjcf_document(body: str, acts: str, physics_hz: float, friction: float, armature: float, floor_size: float) -> str:
+    """The whole `<mujoco>` document around the body tree and actuator elements (y-up, gravity -y)."""
     return f"""<mujoco model="charctl_humanoid3d">
   <compiler angle="radian" inertiafromgeom="true"/>
   <option timestep="{1.0 / physics_hz:.8f}" gravity="0 -9.81 0" integrator="implicitfast">

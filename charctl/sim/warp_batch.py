@@ -85,6 +85,23 @@ def _gc_paused():
             gc.enable()
 
 
+def _init_warp(wp, quiet: bool) -> None:
+    """`wp.init()`; with `quiet`, no greeting and no per-module "compiled/loaded" lines (warnings still print)."""
+    if quiet:
+        wp.config.quiet = True
+        if hasattr(wp, "LOG_WARNING"):
+            wp.config.log_level = max(int(getattr(wp.config, "log_level", 0)), int(wp.LOG_WARNING))
+    wp.init()
+
+
+def _substeps(s: SimSettings) -> int:
+    """Physics steps per control step; physics_hz must be a whole multiple of control_hz."""
+    ratio = s.physics_hz / s.control_hz
+    if abs(ratio - round(ratio)) > 1e-6 or ratio < 1:
+        raise ValueError(f"physics_hz ({s.physics_hz}) must be a whole multiple of control_hz ({s.control_hz})")
+    return int(round(ratio))
+
+
 class WarpBatchedHumanoid:
     """`num_envs` humanoids on MuJoCo Warp; tensors are (num_envs, ...) live views on `device`."""
 
@@ -100,16 +117,9 @@ class WarpBatchedHumanoid:
         import mujoco_warp as mjw
         import warp as wp
 
-        if quiet:  # no greeting, no per-module "compiled/loaded" lines (warnings still print)
-            wp.config.quiet = True
-            if hasattr(wp, "LOG_WARNING"):
-                wp.config.log_level = max(int(getattr(wp.config, "log_level", 0)), int(wp.LOG_WARNING))
-        wp.init()
+        _init_warp(wp, quiet)
         self.settings = s = settings or SimSettings()
-        ratio = s.physics_hz / s.control_hz
-        if abs(ratio - round(ratio)) > 1e-6 or ratio < 1:
-            raise ValueError(f"physics_hz ({s.physics_hz}) must be a whole multiple of control_hz ({s.control_hz})")
-        self.substeps = int(round(ratio))
+        self.substeps = _substeps(s)
         self.device = torch.device(device)
         self.wp_device = wp.get_device(warp_device_name(self.device))
         if self.device.type == "cuda" and self.device.index is None:
@@ -119,26 +129,8 @@ class WarpBatchedHumanoid:
         mjd = mujoco.MjData(self.model)
         mujoco.mj_forward(self.model, mjd)
         self._mjw, self._wp = mjw, wp
-        with wp.ScopedDevice(self.wp_device):
-            self.wp_model = mjw.put_model(self.model)
-            if self.wp_device.is_cuda:
-                self.wp_model.opt.graph_conditional = bool(wp.is_conditional_graph_supported())
-            self.wp_data = mjw.put_data(
-                self.model, mjd, nworld=num_envs, nconmax=NCONMAX_PER_WORLD, njmax=NJMAX_PER_WORLD
-            )
-        d = self.wp_data
-        view = wp.to_torch  # zero-copy: these tensors ARE MuJoCo Warp's state
-        self.qpos = view(d.qpos)  # (N, nq) float32
-        self.qvel = view(d.qvel)  # (N, nv)
-        self.ctrl = view(d.ctrl)  # (N, nu) PD targets, radians
-        self.qacc_warmstart = view(d.qacc_warmstart)
-        self.xfrc_applied = view(d.xfrc_applied)  # (N, nbody, 6) external [force, torque], world frame
-        self.xpos = view(d.xpos)  # (N, nbody, 3) body frame origins; body 0 = world
-        self.xquat = view(d.xquat)  # (N, nbody, 4) wxyz
-        self.cvel = view(d.cvel)  # (N, nbody, 6) [angular, linear] at the subtree COM
-        self.subtree_com = view(d.subtree_com)
-        self.geom_xpos = view(d.geom_xpos)  # (N, ngeom, 3)
-        self.geom_xmat = view(d.geom_xmat)  # (N, ngeom, 3, 3)
+        self._put_on_device(mjd)
+        self._bind_state_views()
         self.reset_fn = reset_fn
         self._unstable = torch.zeros((), dtype=torch.long, device=self.device)
         self.layout = layout()
@@ -153,6 +145,34 @@ class WarpBatchedHumanoid:
         self._warm: set[str] = set()
         self._use_graphs = bool(self.wp_device.is_cuda and wp.is_mempool_enabled(self.wp_device))
         self.recover(torch.ones(num_envs, dtype=torch.bool, device=self.device), count=False)
+
+    def _put_on_device(self, mjd) -> None:
+        """The MuJoCo Warp model and `num_envs` copies of the host state `mjd` on the Warp device
+        (conditional CUDA graphs where the driver supports them)."""
+        mjw, wp = self._mjw, self._wp
+        with wp.ScopedDevice(self.wp_device):
+            self.wp_model = mjw.put_model(self.model)
+            if self.wp_device.is_cuda:
+                self.wp_model.opt.graph_conditional = bool(wp.is_conditional_graph_supported())
+            self.wp_data = mjw.put_data(
+                self.model, mjd, nworld=self.num_envs, nconmax=NCONMAX_PER_WORLD, njmax=NJMAX_PER_WORLD
+            )
+
+    def _bind_state_views(self) -> None:
+        """Torch views of the Warp state arrays (zero-copy, (num_envs, ...), float32, world frame)."""
+        d = self.wp_data
+        view = self._wp.to_torch  # zero-copy: these tensors ARE MuJoCo Warp's state
+        self.qpos = view(d.qpos)  # (N, nq) float32
+        self.qvel = view(d.qvel)  # (N, nv)
+        self.ctrl = view(d.ctrl)  # (N, nu) PD targets, radians
+        self.qacc_warmstart = view(d.qacc_warmstart)
+        self.xfrc_applied = view(d.xfrc_applied)  # (N, nbody, 6) external [force, torque], world frame
+        self.xpos = view(d.xpos)  # (N, nbody, 3) body frame origins; body 0 = world
+        self.xquat = view(d.xquat)  # (N, nbody, 4) wxyz
+        self.cvel = view(d.cvel)  # (N, nbody, 6) [angular, linear] at the subtree COM
+        self.subtree_com = view(d.subtree_com)
+        self.geom_xpos = view(d.geom_xpos)  # (N, ngeom, 3)
+        self.geom_xmat = view(d.geom_xmat)  # (N, ngeom, 3, 3)
 
     # ------------------------------------------------------------------ warp launches
     def _run(self, key: str, fn: Callable[[], None]) -> None:

@@ -150,12 +150,25 @@ def survival_and_confusion(tr, name: str, seconds: float, k: int, ck: int, seed:
 def write_report(run_dir: Path, rows: list[dict], chosen: dict | None, confirm: dict | None, a) -> str:
     """checkpoints.md and checkpoints.png in `a.out` (`a`: the settings, a `CgailCheckpoints`); returns the table."""
     from charctl.files import atomic_write_text
-    from charctl.viz.plots import new_figure, save_figure
 
     out = a.out
     skills = list(rows[0]["no_fall"])
     fid = bool(a.fidelity)
-    lines = [
+    lines = _report_head(run_dir, skills, a, fid)
+    lines += [_report_row(r, skills, a, fid) for r in rows]
+    lines.append("")
+    lines.append("Cells: no-fall / diagonal" + (" / coverage." if fid else "."))
+    if chosen is not None and confirm is not None:
+        lines += _chosen_lines(chosen, confirm, fid)
+    atomic_write_text(out / "checkpoints.md", "\n".join(lines) + "\n")
+    _plot_checkpoints(run_dir, rows, a, fid, out / "checkpoints.png")
+    return "\n".join(lines)
+
+
+def _report_head(run_dir: Path, skills: list[str], a, fid: bool) -> list[str]:
+    """checkpoints.md's title, what the tests measure (episode lengths in s), the selection rule and the
+    table's header (one column per skill)."""
+    return [
         f"# Kept checkpoints of {run_dir.name}",
         "",
         f"no-fall: {a.k} episodes of {a.seconds:g} s per skill; diagonal: Fig 6.8 mean P(commanded skill) over "
@@ -180,31 +193,40 @@ def write_report(run_dir: Path, rows: list[dict], chosen: dict | None, confirm: 
         + " |",
         "|---:|---:|---:|---:|" + ("---:|" if fid else "") + "---|" + "---|" * len(skills),
     ]
-    for r in rows:
-        cells = [
-            f"{r['no_fall'][s]:.2f} / {r['diagonal'][s]:.2f}"
-            + (f" / {r['fidelity']['coverage'][s]:.2f}" if fid else "")
-            for s in skills
-        ]
-        ok = r["worst_no_fall"] >= a.min_no_fall and r["min_diagonal"] >= a.min_diagonal
-        lines.append(
-            f"| {r['samples']:,} | {r['worst_no_fall']:.3f} | {r['min_diagonal']:.3f} | {r['min_class_acc']:.3f} | "
-            + (f"{r['min_coverage']:.3f} | " if fid else "")
-            + f"{'yes' if ok else 'no'} | "
-            + " | ".join(cells)
-            + " |"
-        )
-    lines.append("")
-    lines.append("Cells: no-fall / diagonal" + (" / coverage." if fid else "."))
-    if chosen is not None and confirm is not None:
-        lines += [
-            "",
-            f"Chosen: {chosen['checkpoint']} ({chosen['samples']:,} samples). "
-            f"On fresh starts (seed {confirm['seed']}): worst no-fall {confirm['worst_no_fall']:.3f}, "
-            f"min diagonal {confirm['min_diagonal']:.3f}"
-            + (f", min coverage {confirm['min_coverage']:.3f}." if fid and "min_coverage" in confirm else "."),
-        ]
-    atomic_write_text(out / "checkpoints.md", "\n".join(lines) + "\n")
+
+
+def _report_row(r: dict, skills: list[str], a, fid: bool) -> str:
+    """One checkpoint's table row: its summary numbers, whether it meets both targets, per-skill cells."""
+    cells = [
+        f"{r['no_fall'][s]:.2f} / {r['diagonal'][s]:.2f}" + (f" / {r['fidelity']['coverage'][s]:.2f}" if fid else "")
+        for s in skills
+    ]
+    ok = r["worst_no_fall"] >= a.min_no_fall and r["min_diagonal"] >= a.min_diagonal
+    return (
+        f"| {r['samples']:,} | {r['worst_no_fall']:.3f} | {r['min_diagonal']:.3f} | {r['min_class_acc']:.3f} | "
+        + (f"{r['min_coverage']:.3f} | " if fid else "")
+        + f"{'yes' if ok else 'no'} | "
+        + " | ".join(cells)
+        + " |"
+    )
+
+
+def _chosen_lines(chosen: dict, confirm: dict, fid: bool) -> list[str]:
+    """The chosen checkpoint and its numbers on the confirming fresh starts."""
+    return [
+        "",
+        f"Chosen: {chosen['checkpoint']} ({chosen['samples']:,} samples). "
+        f"On fresh starts (seed {confirm['seed']}): worst no-fall {confirm['worst_no_fall']:.3f}, "
+        f"min diagonal {confirm['min_diagonal']:.3f}"
+        + (f", min coverage {confirm['min_coverage']:.3f}." if fid and "min_coverage" in confirm else "."),
+    ]
+
+
+def _plot_checkpoints(run_dir: Path, rows: list[dict], a, fid: bool, path: Path) -> None:
+    """checkpoints.png: the worst no-fall share, lowest diagonal (and lowest coverage) against samples
+    (millions), with the targets dotted."""
+    from charctl.viz.plots import new_figure, save_figure
+
     fig, ax = new_figure(1, 1, figsize=(7, 3.5))
     x = [r["samples"] / 1e6 for r in rows]
     ax.plot(x, [r["worst_no_fall"] for r in rows], "o-", label="worst skill's no-fall share")
@@ -217,8 +239,7 @@ def write_report(run_dir: Path, rows: list[dict], chosen: dict | None, confirm: 
     ax.set_ylim(0, 1.02)
     ax.legend(loc="lower right")
     ax.set_title(f"{run_dir.name}: kept checkpoints against the targets (dotted)")
-    save_figure(fig, out / "checkpoints.png")
-    return "\n".join(lines)
+    save_figure(fig, path)
 
 
 # ---------------------------------------------------------------------------- the command's side

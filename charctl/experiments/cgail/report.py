@@ -171,9 +171,23 @@ def _plot_switch(curves, names, ka, kb, t_switch, hz, path) -> None:
 
 def write_curves(run_dirs: list[Path], out: Path) -> dict:
     """Training-curve figures from the TensorBoard logs (Fig 6.3, 6.4, 6.6/6.7, 6.9)."""
+    runs = _curve_runs(run_dirs)
+    written = []
+    for fname, (title, tags) in _curve_figures(runs).items():
+        _plot_curves(runs, title, tags, out / fname)
+        written.append(fname)
+    append_report(
+        out, "Training curves", "\n".join(f"![{f}]({f})" for f in written), "runs: " + ", ".join(r[0] for r in runs)
+    )
+    print(f"wrote {len(written)} figures to {out}")
+    return {"figures": written}
+
+
+def _curve_runs(run_dirs: list[Path]) -> list[tuple[str, object, dict]]:
+    """(label, config, TensorBoard scalars) per run; the label names the method (cGAIL, cGAIL-LS or
+    AMP), its skill count and the run folder."""
     from charctl.eval.tb import read_scalars
     from charctl.runs import read_run_config
-    from charctl.viz.plots import new_figure, save_figure
 
     runs = []
     for d in run_dirs:
@@ -183,6 +197,12 @@ def write_curves(run_dirs: list[Path], out: Path) -> dict:
         if cfg.cgail.conditional and cfg.cgail.class_loss == "ls":
             kind += "-LS"
         runs.append((f"{kind} ({n_sk} skills) {Path(d).name}", cfg, read_scalars(Path(d) / "tb")))
+    return runs
+
+
+def _curve_figures(runs: list[tuple[str, object, dict]]) -> dict[str, tuple[str, list[str]]]:
+    """File name -> (title, scalar tags) of every curve figure; the fidelity figures only where some
+    run logged fidelity/<skill>/<measure> scalars (train.fidelity_every)."""
     figs = {
         "curves_reward.png": ("Fig 6.3: mean reward", ["train/reward"]),
         "curves_disc_accuracy.png": (
@@ -205,34 +225,33 @@ def write_curves(run_dirs: list[Path], out: Path) -> dict:
         tags = [t for t in logged if t.startswith("fidelity/") and t.endswith(f"/{measure}")]
         if tags:
             figs[f"curves_fidelity_{measure}.png"] = (title, tags)
-    written = []
-    for fname, (title, tags) in figs.items():
-        fig, ax = new_figure(figsize=(7, 4))
-        any_line = False
-        for label, _, scalars in runs:
-            for tag in tags:
-                if tag in scalars:
-                    steps, vals = scalars[tag]
-                    name = tag.split("/")[1] if tag.startswith("fidelity/") else tag.split("/")[-1]
-                    y = vals if tag.startswith("fidelity/") else _smooth(vals)  # sparse points: drawn as logged
-                    ax.plot(
-                        steps,
-                        y,
-                        marker="." if tag.startswith("fidelity/") else None,
-                        label=f"{label} {name}" if len(tags) > 1 else label,
-                    )
-                    any_line = True
-        ax.set_title(title)
-        ax.set_xlabel("samples")
-        if any_line:
-            ax.legend(fontsize=7)
-        save_figure(fig, out / fname)
-        written.append(fname)
-    append_report(
-        out, "Training curves", "\n".join(f"![{f}]({f})" for f in written), "runs: " + ", ".join(r[0] for r in runs)
-    )
-    print(f"wrote {len(written)} figures to {out}")
-    return {"figures": written}
+    return figs
+
+
+def _plot_curves(runs: list[tuple[str, object, dict]], title: str, tags: list[str], path: Path) -> None:
+    """One figure: each run's `tags` against samples (smoothed; sparse fidelity points as logged)."""
+    from charctl.viz.plots import new_figure, save_figure
+
+    fig, ax = new_figure(figsize=(7, 4))
+    any_line = False
+    for label, _, scalars in runs:
+        for tag in tags:
+            if tag in scalars:
+                steps, vals = scalars[tag]
+                name = tag.split("/")[1] if tag.startswith("fidelity/") else tag.split("/")[-1]
+                y = vals if tag.startswith("fidelity/") else _smooth(vals)  # sparse points: drawn as logged
+                ax.plot(
+                    steps,
+                    y,
+                    marker="." if tag.startswith("fidelity/") else None,
+                    label=f"{label} {name}" if len(tags) > 1 else label,
+                )
+                any_line = True
+    ax.set_title(title)
+    ax.set_xlabel("samples")
+    if any_line:
+        ax.legend(fontsize=7)
+    save_figure(fig, path)
 
 
 def _smooth(v: np.ndarray, k: int = 5) -> np.ndarray:

@@ -24,7 +24,7 @@ import numpy as np
 
 from charctl.errors import CharctlError
 from charctl.experiments.com_cnn.body import BodyModel
-from charctl.experiments.com_cnn.checkpoint import load_run, resolve_targets
+from charctl.experiments.com_cnn.checkpoint import LoadedRun, load_run, resolve_targets
 from charctl.experiments.com_cnn.data import WindowSet, heading_frame
 from charctl.experiments.com_cnn.generate import generation_demo
 from charctl.experiments.com_cnn.report import plot_ar_curves, render_report
@@ -167,6 +167,40 @@ def evaluate(targets: list[str], options: dict, overrides: list[str]) -> dict:
     """`--pose-error` and/or `--dtw` over one or more runs -> pose_error.json, report.md, figures."""
     if not options.get("pose_error") and not options.get("dtw"):
         raise CharctlError("com-cnn evaluates with --pose-error and/or --dtw")
+    runs = _load_runs_of_one_split(targets, overrides)
+    base = runs[0]
+    cfg = base.cfg
+    train_seqs, test_seqs = split_sequences(base.seqs, cfg.data.test_clips)
+    if not test_seqs:
+        raise CharctlError("no held-out clips (data.test_clips is empty): nothing to evaluate")
+    body, types = base.body, dict(cfg.eval.motion_types)
+    print(f"held-out clips: {', '.join(s.name for s in test_seqs)}")
+    preds = _predictors(runs, train_seqs, body)
+    out_dir = Path(options.get("out") or base.dir / "eval")
+    out_dir.mkdir(parents=True, exist_ok=True)
+    result: dict = {
+        "runs": [str(r.dir) for r in runs],
+        "test_clips": [s.name for s in test_seqs],
+        "train_clips": sorted({s.base for s in train_seqs}),
+        "motion_types": {k: list(v) for k, v in types.items()},
+        "paper_table5": dict(cfg.eval.paper_table5),
+        "fps": float(cfg.data.fps),
+    }
+    if options.get("pose_error"):
+        result.update(_pose_error_results(runs, preds, test_seqs, body, types, out_dir))
+        plot_ar_curves(result["autoregressive"], float(cfg.data.fps), out_dir / "ar_curve.png")
+    if options.get("dtw"):
+        result["dtw"] = {p.name: dtw_errors(p, test_seqs, body, types) for p in preds}
+    (out_dir / "pose_error.json").write_text(json.dumps(result, indent=2))
+    report = render_report(result)
+    (out_dir / "report.md").write_text(report)
+    print(report)
+    print(f"wrote {out_dir / 'report.md'}")
+    return result
+
+
+def _load_runs_of_one_split(targets: list[str], overrides: list[str]) -> list[LoadedRun]:
+    """The target runs, labels made unique by their folder name; all must share the first run's split."""
     runs = [load_run(d, overrides) for d in resolve_targets(targets, overrides)]
     labels = [r.label for r in runs]
     for r in runs:
@@ -179,62 +213,53 @@ def evaluate(targets: list[str], options: dict, overrides: list[str]) -> dict:
             raise CharctlError(
                 f"{r.dir} uses different data.{diff[0]} than {base.dir}: evaluate runs of one split together"
             )
-    cfg = base.cfg
-    train_seqs, test_seqs = split_sequences(base.seqs, cfg.data.test_clips)
-    if not test_seqs:
-        raise CharctlError("no held-out clips (data.test_clips is empty): nothing to evaluate")
-    body, types = base.body, dict(cfg.eval.motion_types)
-    print(f"held-out clips: {', '.join(s.name for s in test_seqs)}")
+    return runs
+
+
+def _predictors(runs: list[LoadedRun], train_seqs: list[Sequence], body: BodyModel) -> list[Predictor]:
+    """Each run's network, then the baselines fitted on the training clips: nearest neighbour, last frame."""
+    cfg = runs[0].cfg
     nn = fit_nearest_neighbour(
         WindowSet(train_seqs, body, int(cfg.data.history), str(cfg.data.frame)),
         int(cfg.eval.nn_pca_dims),
         float(cfg.eval.nn_com_weight),
         int(cfg.seed),
     )
-    preds: list[Predictor] = [r.predictor() for r in runs] + [nn, LastFrame(int(cfg.data.history), str(cfg.data.frame))]
-    out_dir = Path(options.get("out") or base.dir / "eval")
-    out_dir.mkdir(parents=True, exist_ok=True)
-    result: dict = {
-        "runs": [str(r.dir) for r in runs],
-        "test_clips": [s.name for s in test_seqs],
-        "train_clips": sorted({s.base for s in train_seqs}),
-        "motion_types": {k: list(v) for k, v in types.items()},
-        "paper_table5": dict(cfg.eval.paper_table5),
-        "fps": float(cfg.data.fps),
-    }
-    if options.get("pose_error"):
-        horizon = max(1, int(round(float(cfg.eval.horizon_s) * cfg.data.fps)))
-        result["teacher_forced"] = {p.name: teacher_forced_errors(p, test_seqs, body, types) for p in preds}
-        result["autoregressive"] = {
+    return [r.predictor() for r in runs] + [nn, LastFrame(int(cfg.data.history), str(cfg.data.frame))]
+
+
+def _pose_error_results(
+    runs: list[LoadedRun],
+    preds: list[Predictor],
+    test_seqs: list[Sequence],
+    body: BodyModel,
+    types: dict,
+    out_dir: Path,
+) -> dict:
+    """`--pose-error`: teacher-forced and autoregressive errors per predictor (horizon `eval.horizon_s`
+    seconds), each run's generation figure in `out_dir`, and its training numbers."""
+    cfg = runs[0].cfg
+    horizon = max(1, int(round(float(cfg.eval.horizon_s) * cfg.data.fps)))
+    return {
+        "teacher_forced": {p.name: teacher_forced_errors(p, test_seqs, body, types) for p in preds},
+        "autoregressive": {
             p.name: autoregressive_errors(p, test_seqs, body, horizon, int(cfg.eval.ar_stride), types) for p in preds
-        }
-        result["generation"] = {
-            r.label: generation_demo(r, out_dir / f"generation_{n}.png") for n, r in enumerate(runs)
-        }
-        result["training"] = {
-            r.label: {
-                k: r.metrics.get(k)
-                for k in (
-                    "step",
-                    "samples",
-                    "wall_s",
-                    "samples_per_s",
-                    "train_loss_ema",
-                    "test_loss",
-                    "train_windows",
-                    "test_windows",
-                    "parameters",
-                    "device",
-                )
-            }
-            for r in runs
-        }
-        plot_ar_curves(result["autoregressive"], float(cfg.data.fps), out_dir / "ar_curve.png")
-    if options.get("dtw"):
-        result["dtw"] = {p.name: dtw_errors(p, test_seqs, body, types) for p in preds}
-    (out_dir / "pose_error.json").write_text(json.dumps(result, indent=2))
-    report = render_report(result)
-    (out_dir / "report.md").write_text(report)
-    print(report)
-    print(f"wrote {out_dir / 'report.md'}")
-    return result
+        },
+        "generation": {r.label: generation_demo(r, out_dir / f"generation_{n}.png") for n, r in enumerate(runs)},
+        "training": {r.label: {k: r.metrics.get(k) for k in _TRAINING_KEYS} for r in runs},
+    }
+
+
+# the training numbers of each run that pose_error.json and report.md carry
+_TRAINING_KEYS = (
+    "step",
+    "samples",
+    "wall_s",
+    "samples_per_s",
+    "train_loss_ema",
+    "test_loss",
+    "train_windows",
+    "test_windows",
+    "parameters",
+    "device",
+)

@@ -176,62 +176,90 @@ class Config(BaseConfig):
         """Cross-field checks; returns a message or None."""
         if (msg := check_fields(cfg, Config, ranges=False)) is not None:  # declared choices (direct callers too)
             return msg
-        if not 0.0 <= cfg.beta < 1.0:
-            return f"beta must satisfy 0 <= beta < 1 (eq 14), got {cfg.beta}"
-        if cfg.speed <= 0:
-            return f"speed must be positive (m/s), got {cfg.speed}"
-        if cfg.hopper.h <= 0 or cfg.hopper.g >= 0:
-            return "hopper.h must be > 0 and hopper.g < 0 (gravity points down, eq 2)"
-        if not 0.2 <= cfg.hopper.thigh_fraction <= 0.5:
-            return f"hopper.thigh_fraction must lie in [0.2, 0.5], got {cfg.hopper.thigh_fraction}"
-        if not 0 < cfg.hopper.knee_max_flexion_deg < 180:
-            return "hopper.knee_max_flexion_deg must lie in (0, 180)"
-        for name in (
-            "l",
-            "kappa",
-            "theta0",
-            "m",
-            "alpha",
-            "swing_angle",
-            "swing_bend",
-            "swing_gain",
-            "bend_gain",
-            "eta",
-        ):
-            b = list(getattr(cfg.bounds, name))
-            if len(b) != 2 or not b[0] < b[1]:
-                return f"bounds.{name} must be [low, high] with low < high, got {b}"
-        if cfg.bounds.l[0] <= 0 or cfg.bounds.kappa[0] <= 0 or cfg.bounds.m[0] <= 0:
-            return "bounds of l, kappa and m must be positive"
-        a = cfg.bounds.alpha
-        if a[0] <= 0.5 <= a[1]:
-            return f"bounds.alpha must not contain 0.5 (B_c of eq 6 is singular there), got {list(a)}"
-        if not 0 < cfg.bounds.theta0[1] < math.pi / 2 or cfg.bounds.theta0[0] <= 0:
-            return "bounds.theta0 must lie inside (0, pi/2)"
-        if cfg.ga.population < 4 or cfg.ga.generations < 1:
-            return "ga.population must be >= 4 and ga.generations >= 1"
-        if not 1 <= cfg.ga.elite < cfg.ga.population:
-            return "ga.elite must lie in [1, population) (elitism keeps the best individual)"
-        if cfg.ga.tournament < 1:
-            return "ga.tournament must be >= 1"
-        if cfg.runtime.workers < 1:
-            return "runtime.workers must be >= 1"
-        if cfg.fitness.energy_scale <= 0 or cfg.fitness.omega_floor <= 0:
-            return "fitness.energy_scale and fitness.omega_floor must be positive"
-        names = [s.name for s in cfg.character.upper]
-        if not names:
-            return "character.upper must list the upper-body joints (chest, neck, shoulders, elbows)"
-        if len(set(names)) != len(names):
-            return f"character.upper joint names must be unique, got {names}"
-        for s in cfg.character.upper:
-            if s.parent != "root" and s.parent not in names[: names.index(s.name)]:
-                return f"character.upper: {s.name!r} has parent {s.parent!r}, which must be 'root' or an earlier joint"
-            if set(s.axes) - set("zx"):
-                return f"character.upper: {s.name!r} axes must use only 'z' and 'x', got {s.axes!r}"
-            if len(s.offset) != 3 or len(s.direction) != 3:
-                return f"character.upper: {s.name!r} offset and direction must have 3 numbers"
-        if cfg.limp.speed_factor <= 0 or cfg.limp.cycles < 2:
-            return "limp.speed_factor must be > 0 and limp.cycles >= 2"
-        if cfg.export.fps <= 0 or cfg.export.video_fps <= 0 or cfg.export.seconds <= 0:
-            return "export.fps, export.video_fps and export.seconds must be positive"
+        for part in (_check_scalars, _check_bounds, _check_ga_and_fitness, _check_character, _check_limp_and_export):
+            if (msg := part(cfg)) is not None:
+                return msg
         return None
+
+
+def _check_scalars(cfg) -> str | None:
+    """beta, speed (m/s) and the hopper's step, gravity and leg proportions."""
+    if not 0.0 <= cfg.beta < 1.0:
+        return f"beta must satisfy 0 <= beta < 1 (eq 14), got {cfg.beta}"
+    if cfg.speed <= 0:
+        return f"speed must be positive (m/s), got {cfg.speed}"
+    if cfg.hopper.h <= 0 or cfg.hopper.g >= 0:
+        return "hopper.h must be > 0 and hopper.g < 0 (gravity points down, eq 2)"
+    if not 0.2 <= cfg.hopper.thigh_fraction <= 0.5:
+        return f"hopper.thigh_fraction must lie in [0.2, 0.5], got {cfg.hopper.thigh_fraction}"
+    if not 0 < cfg.hopper.knee_max_flexion_deg < 180:
+        return "hopper.knee_max_flexion_deg must lie in (0, 180)"
+    return None
+
+
+def _check_bounds(cfg) -> str | None:
+    """Every gene's [low, high] search bounds (theta0 and alpha in rad / fractions of T)."""
+    for name in (
+        "l",
+        "kappa",
+        "theta0",
+        "m",
+        "alpha",
+        "swing_angle",
+        "swing_bend",
+        "swing_gain",
+        "bend_gain",
+        "eta",
+    ):
+        b = list(getattr(cfg.bounds, name))
+        if len(b) != 2 or not b[0] < b[1]:
+            return f"bounds.{name} must be [low, high] with low < high, got {b}"
+    if cfg.bounds.l[0] <= 0 or cfg.bounds.kappa[0] <= 0 or cfg.bounds.m[0] <= 0:
+        return "bounds of l, kappa and m must be positive"
+    a = cfg.bounds.alpha
+    if a[0] <= 0.5 <= a[1]:
+        return f"bounds.alpha must not contain 0.5 (B_c of eq 6 is singular there), got {list(a)}"
+    if not 0 < cfg.bounds.theta0[1] < math.pi / 2 or cfg.bounds.theta0[0] <= 0:
+        return "bounds.theta0 must lie inside (0, pi/2)"
+    return None
+
+
+def _check_ga_and_fitness(cfg) -> str | None:
+    """GA sizes and selection, worker count, fitness scales."""
+    if cfg.ga.population < 4 or cfg.ga.generations < 1:
+        return "ga.population must be >= 4 and ga.generations >= 1"
+    if not 1 <= cfg.ga.elite < cfg.ga.population:
+        return "ga.elite must lie in [1, population) (elitism keeps the best individual)"
+    if cfg.ga.tournament < 1:
+        return "ga.tournament must be >= 1"
+    if cfg.runtime.workers < 1:
+        return "runtime.workers must be >= 1"
+    if cfg.fitness.energy_scale <= 0 or cfg.fitness.omega_floor <= 0:
+        return "fitness.energy_scale and fitness.omega_floor must be positive"
+    return None
+
+
+def _check_character(cfg) -> str | None:
+    """The upper-body joint list: unique names, parents listed earlier, axes z/x, 3-vectors."""
+    names = [s.name for s in cfg.character.upper]
+    if not names:
+        return "character.upper must list the upper-body joints (chest, neck, shoulders, elbows)"
+    if len(set(names)) != len(names):
+        return f"character.upper joint names must be unique, got {names}"
+    for s in cfg.character.upper:
+        if s.parent != "root" and s.parent not in names[: names.index(s.name)]:
+            return f"character.upper: {s.name!r} has parent {s.parent!r}, which must be 'root' or an earlier joint"
+        if set(s.axes) - set("zx"):
+            return f"character.upper: {s.name!r} axes must use only 'z' and 'x', got {s.axes!r}"
+        if len(s.offset) != 3 or len(s.direction) != 3:
+            return f"character.upper: {s.name!r} offset and direction must have 3 numbers"
+    return None
+
+
+def _check_limp_and_export(cfg) -> str | None:
+    """The limp test's speed factor and cycle count; export frame rates and length (s)."""
+    if cfg.limp.speed_factor <= 0 or cfg.limp.cycles < 2:
+        return "limp.speed_factor must be > 0 and limp.cycles >= 2"
+    if cfg.export.fps <= 0 or cfg.export.video_fps <= 0 or cfg.export.seconds <= 0:
+        return "export.fps, export.video_fps and export.seconds must be positive"
+    return None

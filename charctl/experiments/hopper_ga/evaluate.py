@@ -75,10 +75,12 @@ def _table(rows: list[dict]) -> str:
 
 
 def _markdown(rows: list[dict], out: Path) -> str:
-    def rel(p) -> Path:
-        resolved, root = Path(p).resolve(), out.resolve()
-        return resolved.relative_to(root) if resolved.is_relative_to(root) else Path(p)
+    md = _gait_table_md(rows) + _brisk_vs_normal_md(rows) + _limp_table_md(rows) + _figures_md(rows, out)
+    return "\n".join(md) + "\n"
 
+
+def _gait_table_md(rows: list[dict]) -> list[str]:
+    """The report's title, its notes on units, and one gait row per run."""
     md = [
         "# hopper-ga reproduction report",
         "",
@@ -97,20 +99,30 @@ def _markdown(rows: list[dict], out: Path) -> str:
             f"{r['cadence_spm']:.1f} | {r['population']} x {r['generations']} | "
             f"{r['runtime']}, {r['wall_s']:.1f} |"
         )
+    return md
+
+
+def _brisk_vs_normal_md(rows: list[dict]) -> list[str]:
+    """The beta 0.2 -> 0.7 comparison at 10 m/s, when both runs are there (else nothing)."""
     fast = [r for r in rows if r["speed"] == 10 and r["beta"] in (0.2, 0.7)]
-    if len(fast) == 2:
-        n, b = sorted(fast, key=lambda r: r["beta"])
-        md += [
-            "",
-            "## Normal (beta = 0.2) vs brisk (beta = 0.7) at 10 m/s",
-            "",
-            f"E_r {n['E_r']:.3f} -> {b['E_r']:.3f} (targets beta/(1-beta) = 0.25 and 2.33), "
-            f"stride {n['stride_length_m']:.2f} -> {b['stride_length_m']:.2f} m, "
-            f"flight {n['flight_time_s']:.3f} -> {b['flight_time_s']:.3f} s, "
-            f"stance {n['stance_time_s']:.3f} -> {b['stance_time_s']:.3f} s, "
-            f"cadence {n['cadence_spm']:.0f} -> {b['cadence_spm']:.0f} steps/min.",
-        ]
-    md += [
+    if len(fast) != 2:
+        return []
+    n, b = sorted(fast, key=lambda r: r["beta"])
+    return [
+        "",
+        "## Normal (beta = 0.2) vs brisk (beta = 0.7) at 10 m/s",
+        "",
+        f"E_r {n['E_r']:.3f} -> {b['E_r']:.3f} (targets beta/(1-beta) = 0.25 and 2.33), "
+        f"stride {n['stride_length_m']:.2f} -> {b['stride_length_m']:.2f} m, "
+        f"flight {n['flight_time_s']:.3f} -> {b['flight_time_s']:.3f} s, "
+        f"stance {n['stance_time_s']:.3f} -> {b['stance_time_s']:.3f} s, "
+        f"cadence {n['cadence_spm']:.0f} -> {b['cadence_spm']:.0f} steps/min.",
+    ]
+
+
+def _limp_table_md(rows: list[dict]) -> list[str]:
+    """The limp test and COM tracking table (stance times in s, COM z in cm), one row per run."""
+    md = [
         "",
         "## Limp test (Fig 3.13) and COM tracking (Fig 3.14)",
         "",
@@ -136,10 +148,13 @@ def _markdown(rows: list[dict], out: Path) -> str:
     md += [
         "",
         "Right is +z: with the left (limping) leg's stance shortened, the mean COM moves towards the sound right leg.",
-        "",
-        "## Figures",
-        "",
     ]
+    return md
+
+
+def _figures_md(rows: list[dict], out: Path) -> list[str]:
+    """Each run's figures and media that exist, linked relative to `out` where they lie under it."""
+    md = ["", "## Figures", ""]
     for r in rows:
         f = Path(r["figures"])
         md += [f"### speed {r['speed']:g} m/s, beta {r['beta']:g} (`{r['run']}`)", ""]
@@ -150,12 +165,18 @@ def _markdown(rows: list[dict], out: Path) -> str:
             ("limp.png", "limp test (Fig 3.13)"),
         ):
             if (f / name).is_file():
-                md.append(f"![{caption}]({rel(f / name)})")
+                md.append(f"![{caption}]({_rel(f / name, out)})")
         for name in ("run.mp4", "run.bvh"):
             if (f / name).is_file():
-                md.append(f"[{name}]({rel(f / name)})")
+                md.append(f"[{name}]({_rel(f / name, out)})")
         md.append("")
-    return "\n".join(md) + "\n"
+    return md
+
+
+def _rel(p, out: Path) -> Path:
+    """`p` relative to `out` when it lies under it, else `p` as given."""
+    resolved, root = Path(p).resolve(), out.resolve()
+    return resolved.relative_to(root) if resolved.is_relative_to(root) else Path(p)
 
 
 def main(argv: list[str] | None = None) -> None:

@@ -208,56 +208,17 @@ def leg_cycle(p: Params, s: Settings, xdot: np.ndarray | float | None = None) ->
         vy_td, periodic = np.full(N, s.touchdown_vy), np.ones(N, dtype=bool)
     st = integrate_stance(p.l, p.kappa, p.theta0, p.m, xdot, s.h, s.g, vy_td, s.max_stance_steps, d_min)
     code = st.code | np.where(p.bad, BAD_GENE, 0) | np.where(periodic, 0, NO_PERIODIC)
-    lift = np.where(st.lift >= 2, st.lift, 2)  # placeholders keep invalid rows finite
-    lift = np.minimum(lift, st.x.shape[1] - 1)
-    rows = np.arange(N)
-    y_lo, y_lo_prev, x_lo = st.y[rows, lift], st.y[rows, lift - 1], st.x[rows, lift]
-    vy_lo = (y_lo - y_lo_prev) / s.h  # backward difference: the last stance speed
-    T = flight_time(y_lo, vy_lo, p.l * np.cos(p.theta0), s.g)
-    code |= np.where(np.isnan(T), T_NOT_REAL, 0)
-    code |= np.where(~np.isnan(T) & ~((T > 0) & (T <= s.max_flight_s)), T_RANGE, 0)
-    T = np.where((T > 0) & (T <= s.max_flight_s), T, s.h)
+    lift, x_lo, y_lo, vy_lo = _lift_off(st, s)
+    T, t_code = _checked_flight_time(y_lo, vy_lo, p, s)
+    code |= t_code
     n_f = np.maximum(1, np.rint(T / s.h).astype(int))  # flight frames; step h_f = T / n_f ~ h
     h_f = T / n_f
     end = lift + n_f
-    K = int(end.max()) + 1
-    kk = np.arange(K)[None, :]
-    in_stance = kk <= lift[:, None]
-    mask = kk <= end[:, None]
-    tau = np.clip(kk - lift[:, None], 0, n_f[:, None]) * h_f[:, None]  # time since lift-off
-    t = np.where(in_stance, kk * s.h, lift[:, None] * s.h + tau)
-    dt = np.where(mask, np.diff(t, axis=1, prepend=t[:, :1] - s.h), s.h)  # padding frames get h (never 0)
-    # HIP: stance samples up to lift-off, then the ballistic flight of eq 3
-    idx = np.minimum(kk, lift[:, None])
-    x_st = np.take_along_axis(st.x, idx, axis=1)
-    y_st = np.take_along_axis(st.y, idx, axis=1)
-    x = np.where(in_stance, x_st, x_lo[:, None] + xdot[:, None] * tau)
-    y = np.where(in_stance, y_st, y_lo[:, None] + vy_lo[:, None] * tau + 0.5 * s.g * tau * tau)
-    # idle leg in stance: the hopper's leg (knee keeps |HIP - FOOT| = d <= l)
-    th_c_i = np.arctan2(-x_st, y_st)
-    th_l_i = bend_from_d(np.minimum(np.hypot(x_st, y_st), p.l[:, None]), a[:, None], b[:, None])
-    # active leg in stance: driven by the idle leg's sweep (the "scaled HIP motion" of 3.2.1)
-    sweep = p.theta0[:, None] - th_c_i
-    th_c_a = p.swing_angle[:, None] + p.swing_gain[:, None] * sweep
-    th_l_a = p.swing_bend[:, None] + p.bend_gain[:, None] * sweep
-    # flight: eq 5 with B_l = t/T and B_c of eq 6, towards the swapped touchdown pose
-    lo = lambda v: v[rows, lift][:, None]  # noqa: E731  value at lift-off
-    B_l = tau / T[:, None]
-    B_c = b_curve(tau, T[:, None], p.alpha[:, None])
-    idle_c = lo(th_c_i) + (p.swing_angle[:, None] - lo(th_c_i)) * B_c
-    idle_l = lo(th_l_i) + (p.swing_bend[:, None] - lo(th_l_i)) * B_l
-    act_c = lo(th_c_a) + (p.theta0[:, None] - lo(th_c_a)) * B_c
-    act_l = lo(th_l_a) * (1.0 - B_l)
-    theta_c = np.stack([np.where(in_stance, th_c_i, idle_c), np.where(in_stance, th_c_a, act_c)], -1)
-    theta_l = np.stack([np.where(in_stance, th_l_i, idle_l), np.where(in_stance, th_l_a, act_l)], -1)
-    # validity of the legs over the cycle frames
-    d = d_from_bend(theta_l, a[:, None, None], b[:, None, None])
-    foot_y = y[..., None] - d * np.cos(theta_c)
-    m3 = mask[..., None]
-    code |= np.where(np.any(m3 & ~(foot_y >= -s.ground_tol), axis=(1, 2)), FOOT_GROUND, 0)
-    bad_bend = ~((theta_l[..., 1] >= -1e-9) & (theta_l[..., 1] <= bend_max[:, None] + 1e-9))
-    code |= np.where(np.any(mask & bad_bend, axis=1), SWING_KNEE, 0)
-    code |= np.where(np.any(m3 & ~(np.abs(theta_c) <= np.pi / 2), axis=(1, 2)), HIP_RANGE, 0)
+    kk, in_stance, mask, tau, t, dt = _frame_grid(lift, end, n_f, h_f, s.h)
+    x, y, x_st, y_st = _hip_path(st, kk, lift, in_stance, tau, x_lo, y_lo, vy_lo, xdot, s.g)
+    theta_c, theta_l = _leg_angles(p, a, b, x_st, y_st, lift, in_stance, tau, T)
+    d, leg_code = _leg_validity(theta_c, theta_l, y, mask, a, b, bend_max, s)
+    code |= leg_code
     # eq 7 target COM (x): the idle foot in stance, idle -> active foot over the flight
     foot_a_x = x + d[..., 1] * np.sin(theta_c[..., 1])
     w = np.where(in_stance, 0.0, tau / T[:, None])
@@ -278,3 +239,87 @@ def leg_cycle(p: Params, s: Settings, xdot: np.ndarray | float | None = None) ->
         xdot=xdot,
         code=code,
     )
+
+
+def _lift_off(st: Stance, s: Settings) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Lift-off frame (>= 2, placeholders keep invalid rows finite), HIP x and y there (m) and the
+    last stance vertical speed (m/s, backward difference)."""
+    lift = np.where(st.lift >= 2, st.lift, 2)  # placeholders keep invalid rows finite
+    lift = np.minimum(lift, st.x.shape[1] - 1)
+    rows = np.arange(len(lift))
+    y_lo, y_lo_prev, x_lo = st.y[rows, lift], st.y[rows, lift - 1], st.x[rows, lift]
+    vy_lo = (y_lo - y_lo_prev) / s.h  # backward difference: the last stance speed
+    return lift, x_lo, y_lo, vy_lo
+
+
+def _checked_flight_time(y_lo: np.ndarray, vy_lo: np.ndarray, p: Params, s: Settings) -> tuple[np.ndarray, np.ndarray]:
+    """Flight time T (s) to touchdown at the swapped pose's HIP height, and its invalidity bits;
+    rows without a real T in (0, max_flight_s] get T = h."""
+    T = flight_time(y_lo, vy_lo, p.l * np.cos(p.theta0), s.g)
+    code = np.where(np.isnan(T), T_NOT_REAL, 0)
+    code |= np.where(~np.isnan(T) & ~((T > 0) & (T <= s.max_flight_s)), T_RANGE, 0)
+    T = np.where((T > 0) & (T <= s.max_flight_s), T, s.h)
+    return T, code
+
+
+def _frame_grid(
+    lift: np.ndarray, end: np.ndarray, n_f: np.ndarray, h_f: np.ndarray, h: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The common (N, K) frame grid: frame index kk (1, K), stance and cycle masks, time since
+    lift-off tau (s), time since touchdown t (s) and its steps dt (padding frames get h, never 0)."""
+    K = int(end.max()) + 1
+    kk = np.arange(K)[None, :]
+    in_stance = kk <= lift[:, None]
+    mask = kk <= end[:, None]
+    tau = np.clip(kk - lift[:, None], 0, n_f[:, None]) * h_f[:, None]  # time since lift-off
+    t = np.where(in_stance, kk * h, lift[:, None] * h + tau)
+    dt = np.where(mask, np.diff(t, axis=1, prepend=t[:, :1] - h), h)  # padding frames get h (never 0)
+    return kk, in_stance, mask, tau, t, dt
+
+
+def _hip_path(st: Stance, kk, lift, in_stance, tau, x_lo, y_lo, vy_lo, xdot, g: float) -> tuple[np.ndarray, ...]:
+    """HIP x, y (N, K; m, idle-foot frame): stance samples up to lift-off, then the ballistic flight of
+    eq 3; also the stance samples held at lift-off (x_st, y_st)."""
+    idx = np.minimum(kk, lift[:, None])
+    x_st = np.take_along_axis(st.x, idx, axis=1)
+    y_st = np.take_along_axis(st.y, idx, axis=1)
+    x = np.where(in_stance, x_st, x_lo[:, None] + xdot[:, None] * tau)
+    y = np.where(in_stance, y_st, y_lo[:, None] + vy_lo[:, None] * tau + 0.5 * g * tau * tau)
+    return x, y, x_st, y_st
+
+
+def _leg_angles(p: Params, a, b, x_st, y_st, lift, in_stance, tau, T) -> tuple[np.ndarray, np.ndarray]:
+    """theta_c and theta_l (N, K, 2; rad; leg 0 idle, 1 active) over the cycle: the idle leg follows the
+    HIP in stance, the active leg the idle leg's sweep; in flight eq 5 with B_l = t/T and B_c of eq 6."""
+    rows = np.arange(len(lift))
+    # idle leg in stance: the hopper's leg (knee keeps |HIP - FOOT| = d <= l)
+    th_c_i = np.arctan2(-x_st, y_st)
+    th_l_i = bend_from_d(np.minimum(np.hypot(x_st, y_st), p.l[:, None]), a[:, None], b[:, None])
+    # active leg in stance: driven by the idle leg's sweep (the "scaled HIP motion" of 3.2.1)
+    sweep = p.theta0[:, None] - th_c_i
+    th_c_a = p.swing_angle[:, None] + p.swing_gain[:, None] * sweep
+    th_l_a = p.swing_bend[:, None] + p.bend_gain[:, None] * sweep
+    # flight: eq 5 with B_l = t/T and B_c of eq 6, towards the swapped touchdown pose
+    lo = lambda v: v[rows, lift][:, None]  # noqa: E731  value at lift-off
+    B_l = tau / T[:, None]
+    B_c = b_curve(tau, T[:, None], p.alpha[:, None])
+    idle_c = lo(th_c_i) + (p.swing_angle[:, None] - lo(th_c_i)) * B_c
+    idle_l = lo(th_l_i) + (p.swing_bend[:, None] - lo(th_l_i)) * B_l
+    act_c = lo(th_c_a) + (p.theta0[:, None] - lo(th_c_a)) * B_c
+    act_l = lo(th_l_a) * (1.0 - B_l)
+    theta_c = np.stack([np.where(in_stance, th_c_i, idle_c), np.where(in_stance, th_c_a, act_c)], -1)
+    theta_l = np.stack([np.where(in_stance, th_l_i, idle_l), np.where(in_stance, th_l_a, act_l)], -1)
+    return theta_c, theta_l
+
+
+def _leg_validity(theta_c, theta_l, y, mask, a, b, bend_max, s: Settings) -> tuple[np.ndarray, np.ndarray]:
+    """Hip-foot distances d (N, K, 2; m) and the invalidity bits of the legs over the cycle frames
+    (a foot below ground, the active knee out of [0, bend_max], a hip angle beyond +-pi/2)."""
+    d = d_from_bend(theta_l, a[:, None, None], b[:, None, None])
+    foot_y = y[..., None] - d * np.cos(theta_c)
+    m3 = mask[..., None]
+    code = np.where(np.any(m3 & ~(foot_y >= -s.ground_tol), axis=(1, 2)), FOOT_GROUND, 0)
+    bad_bend = ~((theta_l[..., 1] >= -1e-9) & (theta_l[..., 1] <= bend_max[:, None] + 1e-9))
+    code |= np.where(np.any(mask & bad_bend, axis=1), SWING_KNEE, 0)
+    code |= np.where(np.any(m3 & ~(np.abs(theta_c) <= np.pi / 2), axis=(1, 2)), HIP_RANGE, 0)
+    return d, code

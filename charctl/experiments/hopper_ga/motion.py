@@ -196,41 +196,54 @@ def mjcf(s: Settings, l: float) -> tuple[str, list[tuple[str, int, int]]]:
     kids = {j["name"]: [k for k in joints if k["parent"] == j["name"]] for j in joints}
     hinges: list[tuple[str, int, int]] = []
     index = {j["name"]: i for i, j in enumerate(joints)}
-    w = s.body.hip_half_width
-
-    def body_xml(j: dict, depth: int) -> list[str]:
-        pad = "  " * depth
-        o = j["offset"]
-        out = [f'{pad}<body name="{j["name"]}" pos="{o[0]:.4f} {o[1]:.4f} {o[2]:.4f}">']
-        axes = ("z", "x") if j["kind"] == "upper" else ("z",)
-        for ax in axes:
-            name = f"{j['name']}_{ax}"
-            hinges.append((name, index[j["name"]], 0 if ax == "z" else 1))
-            vec = "0 0 1" if ax == "z" else "1 0 0"
-            out.append(f'{pad}  <joint name="{name}" type="hinge" axis="{vec}" limited="false" armature="0.01"/>')
-        seg = j["segment"]
-        key = j["name"].split("_")[-1]
-        r = _RADIUS.get(key, 0.045)
-        rgba = "0.85 0.55 0.4 1" if j["name"].startswith("left") else "0.4 0.6 0.85 1"
-        if j["name"] == "neck":
-            out.append(
-                f'{pad}  <geom type="sphere" size="{r}" '
-                f'pos="{seg[0] * 0.6:.4f} {seg[1] * 0.6:.4f} {seg[2] * 0.6:.4f}" rgba="0.9 0.8 0.7 1"/>'
-            )
-        else:
-            out.append(
-                f'{pad}  <geom type="capsule" size="{r}" '
-                f'fromto="0 0 0 {seg[0]:.4f} {seg[1]:.4f} {seg[2]:.4f}" rgba="{rgba}"/>'
-            )
-        for k in kids[j["name"]]:
-            out += body_xml(k, depth + 1)
-        out.append(f"{pad}</body>")
-        return out
-
     root_kids = []
     for k in kids["root"]:
-        root_kids += body_xml(k, 3)
-    xml = "\n".join(
+        root_kids += _body_xml(k, 3, kids, index, hinges)
+    return _mjcf_document(s.body.hip_half_width, root_kids), hinges
+
+
+def _body_xml(
+    j: dict, depth: int, kids: dict[str, list[dict]], index: dict[str, int], hinges: list[tuple[str, int, int]]
+) -> list[str]:
+    """Joint `j`'s `<body>` element with its descendants' (offsets in m); appends its hinges (z, then x
+    for an upper-body joint) to `hinges` in the order MuJoCo lays them out in qpos."""
+    pad = "  " * depth
+    o = j["offset"]
+    out = [f'{pad}<body name="{j["name"]}" pos="{o[0]:.4f} {o[1]:.4f} {o[2]:.4f}">']
+    axes = ("z", "x") if j["kind"] == "upper" else ("z",)
+    for ax in axes:
+        name = f"{j['name']}_{ax}"
+        hinges.append((name, index[j["name"]], 0 if ax == "z" else 1))
+        vec = "0 0 1" if ax == "z" else "1 0 0"
+        out.append(f'{pad}  <joint name="{name}" type="hinge" axis="{vec}" limited="false" armature="0.01"/>')
+    out.append(_segment_geom_xml(j, pad))
+    for k in kids[j["name"]]:
+        out += _body_xml(k, depth + 1, kids, index, hinges)
+    out.append(f"{pad}</body>")
+    return out
+
+
+def _segment_geom_xml(j: dict, pad: str) -> str:
+    """The geom of joint `j`'s segment (m, joint frame): a head sphere for the neck, else a capsule
+    along the segment (left side orange, right side blue)."""
+    seg = j["segment"]
+    key = j["name"].split("_")[-1]
+    r = _RADIUS.get(key, 0.045)
+    rgba = "0.85 0.55 0.4 1" if j["name"].startswith("left") else "0.4 0.6 0.85 1"
+    if j["name"] == "neck":
+        return (
+            f'{pad}  <geom type="sphere" size="{r}" '
+            f'pos="{seg[0] * 0.6:.4f} {seg[1] * 0.6:.4f} {seg[2] * 0.6:.4f}" rgba="0.9 0.8 0.7 1"/>'
+        )
+    return (
+        f'{pad}  <geom type="capsule" size="{r}" fromto="0 0 0 {seg[0]:.4f} {seg[1]:.4f} {seg[2]:.4f}" rgba="{rgba}"/>'
+    )
+
+
+def _mjcf_document(w: float, root_kids: list[str]) -> str:
+    """The `<mujoco>` document: floor, light, the pelvis (half width `w`, m) on a free joint with a side
+    camera, and the bodies hanging from it."""
+    return "\n".join(
         [
             '<mujoco model="hopper-ga">',
             '  <visual><headlight ambient="0.45 0.45 0.45" '
@@ -252,7 +265,6 @@ def mjcf(s: Settings, l: float) -> tuple[str, list[tuple[str, int, int]]]:
             "</mujoco>",
         ]
     )
-    return xml, hinges
 
 
 def qpos_sequence(model, hinges: list[tuple[str, int, int]], root: np.ndarray, euler: np.ndarray) -> np.ndarray:

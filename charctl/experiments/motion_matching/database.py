@@ -179,12 +179,55 @@ def _clip_arrays(s: SourceMotion, info: SkeletonInfo, cfg, fut: np.ndarray, past
     pose[:, 0] = rel_root
     pose = continuous_sign(pose)
     t = np.arange(T)
+    step_local, step_heading = _playback_steps(ground, heading, t)
+    blocks = _feature_blocks(s, info, cfg, ground, heading, rel_root, t, fut, past)
+    valid = (t + fut.max() <= T - 1) & (t - (past.max() if past.size else 0) >= 0)
+    searchable, phase = _searchable_and_phase(s, cfg, t)
+    return {
+        "ground": ground,
+        "heading": heading,
+        "height": s.root_pos[:, 1].copy(),
+        "step_local": step_local,
+        "step_heading": step_heading,
+        "pose": pose,
+        "pose_vel": _pose_velocity(pose, fps),
+        "height_vel": np.gradient(s.root_pos[:, 1], 1.0 / fps),
+        "phase": phase,
+        "valid": valid,
+        "searchable": searchable,
+        "raw": np.concatenate([b for _, b in blocks], axis=1),
+        "blocks": [(n, b.shape[1]) for n, b in blocks],
+    }
+
+
+def _playback_steps(ground: np.ndarray, heading: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per frame, the ground step to the next frame in the frame's heading frame (m) and the heading
+    change (rad); the last frame repeats the one before it."""
+    T = len(t)
     nxt = np.minimum(t + 1, T - 1)
     step_local = rotate_ground(ground[nxt] - ground, -heading)
     step_heading = wrap_angle(heading[nxt] - heading)
     step_local[-1], step_heading[-1] = step_local[-2], step_heading[-2]
-    vel = np.gradient(ground, 1.0 / fps, axis=0)  # (T, 2) m/s world
+    return step_local, step_heading
 
+
+def _feature_blocks(
+    s: SourceMotion,
+    info: SkeletonInfo,
+    cfg,
+    ground: np.ndarray,
+    heading: np.ndarray,
+    rel_root: np.ndarray,
+    t: np.ndarray,
+    fut: np.ndarray,
+    past: np.ndarray,
+) -> list[tuple[str, np.ndarray]]:
+    """The raw feature blocks (name, (T, width)) in layout order: root height and tilt, end effectors
+    (m, m/s) in the heading frame, future (and past) trajectory positions, velocities and directions
+    at the frame offsets `fut` / `past`."""
+    T = len(t)
+    fps = s.fps
+    vel = np.gradient(ground, 1.0 / fps, axis=0)  # (T, 2) m/s world
     blocks: list[tuple[str, np.ndarray]] = []
     blocks.append(("root_height", s.root_pos[:, 1:2]))
     tilt = R.log_map(rel_root)
@@ -206,7 +249,13 @@ def _clip_arrays(s: SourceMotion, info: SkeletonInfo, cfg, fut: np.ndarray, past
     if past.size:
         pidx = np.maximum(t[:, None] - past[None], 0)
         blocks.append(("past_pos", rotate_ground(ground[pidx] - ground[:, None], h_loc).reshape(T, -1)))
-    valid = (t + fut.max() <= T - 1) & (t - (past.max() if past.size else 0) >= 0)
+    return blocks
+
+
+def _searchable_and_phase(s: SourceMotion, cfg, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Which frames the search may jump to, and each frame's phase (frames; within the period for a
+    looping clip, else the frame index, with the last `runtime.end_buffer` frames left out)."""
+    T = len(t)
     searchable = (t >= s.search_start) & (t < s.search_stop)
     if s.period <= 0:
         end_buffer = paper_frames(cfg.runtime.end_buffer, cfg)
@@ -214,24 +263,16 @@ def _clip_arrays(s: SourceMotion, info: SkeletonInfo, cfg, fut: np.ndarray, past
         phase = t.astype(float)
     else:
         phase = np.mod(t - s.search_start, s.period)
-    # angular velocity of the pose in the parent frame (left differences), central average
+    return searchable, phase
+
+
+def _pose_velocity(pose: np.ndarray, fps: float) -> np.ndarray:
+    """Angular velocity (rad/s) of each joint's rotation in its parent frame: left differences,
+    averaged to central ones inside the clip."""
     fwd = R.log_map(R.multiply(pose[1:], R.conjugate(pose[:-1]))) * fps
-    pose_vel = np.concatenate([fwd[:1], 0.5 * (fwd[1:] + fwd[:-1]), fwd[-1:]]) if T > 2 else np.concatenate([fwd, fwd])
-    return {
-        "ground": ground,
-        "heading": heading,
-        "height": s.root_pos[:, 1].copy(),
-        "step_local": step_local,
-        "step_heading": step_heading,
-        "pose": pose,
-        "pose_vel": pose_vel,
-        "height_vel": np.gradient(s.root_pos[:, 1], 1.0 / fps),
-        "phase": phase,
-        "valid": valid,
-        "searchable": searchable,
-        "raw": np.concatenate([b for _, b in blocks], axis=1),
-        "blocks": [(n, b.shape[1]) for n, b in blocks],
-    }
+    return (
+        np.concatenate([fwd[:1], 0.5 * (fwd[1:] + fwd[:-1]), fwd[-1:]]) if len(pose) > 2 else np.concatenate([fwd, fwd])
+    )
 
 
 def smoothed_heading(root_rot: np.ndarray, forward: np.ndarray, seconds: float, fps: float) -> np.ndarray:

@@ -20,7 +20,7 @@ def export(target: str, options: dict, overrides: list[str]) -> None:
     """Run the config's path (`path=`, `case=`) and write metrics.json, root_path.csv, path.png and
     `--bvh` / `--video` of the generated motion."""
     from charctl.experiments.motion_matching.database import build_database
-    from charctl.experiments.motion_matching.paths import draw_paths, make_path, path_errors
+    from charctl.experiments.motion_matching.paths import make_path, path_errors
     from charctl.experiments.motion_matching.runtime import run_path
     from charctl.experiments.motion_matching.search import make_index
     from charctl.runs import new_run
@@ -29,12 +29,7 @@ def export(target: str, options: dict, overrides: list[str]) -> None:
     cfg, case = resolve_case(cfg)
     path = make_path(str(cfg.path), cfg.paths)
     seconds = options.get("seconds")
-    if seconds is not None and seconds <= 0:
-        raise CharctlError(f"--seconds must be positive, got {seconds}")
-    if options.get("video") and cfg.data.bvh_dir:
-        raise CharctlError("--video needs the humanoid database; with data.bvh_dir export --bvh only")
-    if options.get("bvh") and options.get("fps") is not None and cfg.data.bvh_dir:
-        raise CharctlError(FPS_USER_SKELETON)
+    _check_options(cfg, options, seconds)
     db = build_database(cfg)
     index = make_index(cfg.runtime.index, db)
     tic = time.perf_counter()
@@ -55,14 +50,41 @@ def export(target: str, options: dict, overrides: list[str]) -> None:
         "realtime_factor": rollout.num_frames / db.fps / max(gen_s, 1e-9),
     }
     (out / "metrics.json").write_text(json.dumps(metrics, indent=2))
+    _write_root_path(out / "root_path.csv", rollout, db.fps)
+    _plot_path(out / "path.png", path, rollout, label, err)
+    print(
+        f"{path.name} ({label}): {rollout.num_frames} frames, "
+        f"e_time {err['e_time_mean']:.3f} ± {err['e_time_std']:.3f} m, "
+        f"e_near {err['e_near_mean']:.3f} ± {err['e_near_std']:.3f} m -> {out}"
+    )
+    _write_media(db, rollout, options)
+
+
+def _check_options(cfg, options: dict, seconds: float | None) -> None:
+    """Reject `--seconds` <= 0, `--video` with a user skeleton (data.bvh_dir) and `--fps` for its BVH."""
+    if seconds is not None and seconds <= 0:
+        raise CharctlError(f"--seconds must be positive, got {seconds}")
+    if options.get("video") and cfg.data.bvh_dir:
+        raise CharctlError("--video needs the humanoid database; with data.bvh_dir export --bvh only")
+    if options.get("bvh") and options.get("fps") is not None and cfg.data.bvh_dir:
+        raise CharctlError(FPS_USER_SKELETON)
+
+
+def _write_root_path(file: Path, rollout, fps: float) -> None:
+    """root_path.csv: time (s) and the ground-plane root position x, z (m) of every generated frame."""
     np.savetxt(
-        out / "root_path.csv",
-        np.column_stack([np.arange(rollout.num_frames) / db.fps, rollout.ground]),
+        file,
+        np.column_stack([np.arange(rollout.num_frames) / fps, rollout.ground]),
         delimiter=",",
         header="t,x,z",
         comments="",
         fmt="%.5f",
     )
+
+
+def _plot_path(file: Path, path, rollout, label: str, err: dict) -> None:
+    """path.png: the target path and the generated root path, titled with their errors (m)."""
+    from charctl.experiments.motion_matching.paths import draw_paths
     from charctl.viz.plots import new_figure, save_figure
 
     fig, ax = new_figure(figsize=(5, 5))
@@ -72,12 +94,11 @@ def export(target: str, options: dict, overrides: list[str]) -> None:
         f"e_near {err['e_near_mean']:.3f}±{err['e_near_std']:.3f} m",
         fontsize=8,
     )
-    save_figure(fig, out / "path.png")
-    print(
-        f"{path.name} ({label}): {rollout.num_frames} frames, "
-        f"e_time {err['e_time_mean']:.3f} ± {err['e_time_std']:.3f} m, "
-        f"e_near {err['e_near_mean']:.3f} ± {err['e_near_std']:.3f} m -> {out}"
-    )
+    save_figure(fig, file)
+
+
+def _write_media(db, rollout, options: dict) -> None:
+    """`--bvh` and `--video` of the generated motion (the video at `--fps`, default 30)."""
     if options.get("bvh"):
         written = write_rollout_bvh(db, rollout, options["bvh"], options.get("fps"))
         print(f"wrote {written}")

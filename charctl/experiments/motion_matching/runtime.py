@@ -146,16 +146,7 @@ def run_path(
     ctrl = Controller(db, path, cfg.paths.speed, cfg.paths.correction_halflife)
     P = db.layout.pose_dims
     traj_cols = slice(P, db.layout.dims)
-
-    ground = np.empty((T, 2))
-    heading = np.empty(T)
-    frames = np.empty(T, dtype=int)
-    tangent = path.tangent_at(0.0)
-    ground[0] = path.point_at(0.0)
-    heading[0] = np.arctan2(-tangent[1], tangent[0])
-    q0 = db.layout.normalise(ctrl.trajectory_raw(0.0, ground[0], heading[0], ground, 0), traj_cols)
-    cur = shift_start(db, initial_frame(db, q0), start_shift)
-    frames[0] = cur
+    ground, heading, frames, cur = _start_on_path(db, path, ctrl, T, traj_cols, start_shift)
     blend = PoseBlend(db, cur, rt.halflife, with_pose, rt.inertialize_root)
 
     t, searches, jumps, t_search = 0, 0, 0, 0.0
@@ -163,11 +154,7 @@ def run_path(
         traj = db.layout.normalise(ctrl.trajectory_raw(t * dt, ground[t], heading[t], ground, t), traj_cols)
         query = np.concatenate([db.features[cur, :P], traj])
         tic = time.perf_counter()
-        best, d2 = search(db, index, query, cur)
-        if rt.continue_if_best and db.valid[cur] and cur + 1 < db.clip_stop[db.clip_id[cur]]:
-            dc = db.features[cur] - query
-            if float(dc @ dc) <= d2:
-                best = cur
+        best = _best_match(db, index, query, cur, rt.continue_if_best)
         t_search += time.perf_counter() - tic
         searches += 1
         jumps += int(best != cur)
@@ -183,6 +170,35 @@ def run_path(
     if with_pose:
         out.height, out.pose = blend.result(T)
     return out
+
+
+def _start_on_path(
+    db: Database, path: TargetPath, ctrl: Controller, T: int, traj_cols: slice, start_shift: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
+    """Empty ground (T, 2; m), heading (T,; rad) and frame (T,) tracks with the first entry set: the
+    path's start point, facing along its tangent, on the best-matching start frame (shifted by
+    `start_shift` of its clip); also that frame."""
+    ground = np.empty((T, 2))
+    heading = np.empty(T)
+    frames = np.empty(T, dtype=int)
+    tangent = path.tangent_at(0.0)
+    ground[0] = path.point_at(0.0)
+    heading[0] = np.arctan2(-tangent[1], tangent[0])
+    q0 = db.layout.normalise(ctrl.trajectory_raw(0.0, ground[0], heading[0], ground, 0), traj_cols)
+    cur = shift_start(db, initial_frame(db, q0), start_shift)
+    frames[0] = cur
+    return ground, heading, frames, cur
+
+
+def _best_match(db: Database, index, query: np.ndarray, cur: int, continue_if_best: bool) -> int:
+    """The database frame to play from next: the search's best, or `cur` itself (its clip continues)
+    when `continue_if_best` and `cur` is a valid frame before its clip's end that matches as well."""
+    best, d2 = search(db, index, query, cur)
+    if continue_if_best and db.valid[cur] and cur + 1 < db.clip_stop[db.clip_id[cur]]:
+        dc = db.features[cur] - query
+        if float(dc @ dc) <= d2:
+            best = cur
+    return best
 
 
 def _smooth_rate(x: np.ndarray, dt: float, half: int = 2) -> np.ndarray:

@@ -126,12 +126,53 @@ def _root_drop(root: np.ndarray, rot: np.ndarray, targets: list[np.ndarray], off
 
 
 def _solve(src, H, contacts, hum: _Humanoid, arm_scale: float, name: str, label: str, ground: bool = True):
+    """The retargeted clip, the end-effector targets (m, world), the scaled source end effectors and
+    the stance flags; `H`: the source's world rotations by humanoid joint name."""
     j = src.jmap.joints
     P, T = src.pos, src.num_frames
     skel, idx, off = hum.skel, hum.idx, hum.skel.offsets
     root_pos = 0.5 * (P[:, j["right_hip"]] + P[:, j["left_hip"]])
     root_rot = H["root"]
+    scaled, targets, foot_rot, stance = _ankle_targets(src, H, contacts, hum, ground)
+    hip_off = [off[idx["right_hip"]], off[idx["left_hip"]]]
+    drop = _root_drop(root_pos, root_rot, [targets["right_ankle"], targets["left_ankle"]], hip_off, hum.leg, src.fps)
+    root_pos = root_pos - drop[:, None] * _Y
 
+    local = np.tile(R.IDENTITY, (T, skel.num_bodies, 1))
+    local[:, idx["root"]] = root_rot
+    local[:, idx["chest"]] = R.multiply(R.conjugate(root_rot), H["chest"])
+    local[:, idx["neck"]] = R.multiply(R.conjugate(H["chest"]), H["neck"])
+    chest_pos = root_pos + R.rotate(root_rot, np.broadcast_to(off[idx["chest"]], root_pos.shape))
+    for s in SIDES:
+        _solve_leg(s, local, root_pos, root_rot, H, targets[f"{s}_ankle"], foot_rot[s], hum)
+        # arms: the source hand relative to its shoulder, scaled to the humanoid's arm, at its shoulder
+        sh = chest_pos + R.rotate(H["chest"], np.broadcast_to(off[idx[f"{s}_shoulder"]], root_pos.shape))
+        rel = P[:, j[f"{s}_wrist"]] - P[:, j[f"{s}_shoulder"]]
+        hand = sh + arm_scale * rel
+        scaled[f"{s}_wrist"] = hand
+        if ground:  # a hand on the floor: the wrist sphere rests on it
+            hand = hand.copy()
+            hand[:, 1] = np.maximum(hand[:, 1], hum.hand_radius)
+        targets[f"{s}_wrist"] = hand
+        _solve_arm(s, local, sh, hand, H, hum)
+    clip = Clip(
+        name=name,
+        fps=src.fps,
+        root_pos=root_pos,
+        local_rot=R.continuous_sign(R.normalize(local)),
+        loop=False,
+        label=label,
+        source=src.path,
+        skeleton=skel,
+    )
+    return clip, targets, scaled, stance
+
+
+def _ankle_targets(src, H, contacts: np.ndarray, hum: _Humanoid, ground: bool) -> tuple[dict, dict, dict, np.ndarray]:
+    """Per side: the source ankle (m, world), its IK target (planted on the ground when `ground`), the
+    foot's world rotation, and the (T, 2) stance flags (recomputed by the planting when `ground`)."""
+    j = src.jmap.joints
+    P = src.pos
     scaled: dict[str, np.ndarray] = {}
     targets: dict[str, np.ndarray] = {}
     foot_rot: dict[str, np.ndarray] = {}
@@ -145,46 +186,37 @@ def _solve(src, H, contacts, hum: _Humanoid, arm_scale: float, name: str, label:
         if ground:
             tgt, stance[:, k] = _plant_feet(ankle, q, hum, src.fps)
         targets[f"{s}_ankle"] = tgt
+    return scaled, targets, foot_rot, stance
 
-    hip_off = [off[idx["right_hip"]], off[idx["left_hip"]]]
-    drop = _root_drop(root_pos, root_rot, [targets["right_ankle"], targets["left_ankle"]], hip_off, hum.leg, src.fps)
-    root_pos = root_pos - drop[:, None] * _Y
 
-    local = np.tile(R.IDENTITY, (T, skel.num_bodies, 1))
-    local[:, idx["root"]] = root_rot
-    local[:, idx["chest"]] = R.multiply(R.conjugate(root_rot), H["chest"])
-    local[:, idx["neck"]] = R.multiply(R.conjugate(H["chest"]), H["neck"])
-    chest_pos = root_pos + R.rotate(root_rot, np.broadcast_to(off[idx["chest"]], root_pos.shape))
-    for s in SIDES:
-        # legs
-        base = root_pos + R.rotate(root_rot, np.broadcast_to(off[idx[f"{s}_hip"]], root_pos.shape))
-        pole = R.rotate(H[f"{s}_hip"], np.broadcast_to(_Z, root_pos.shape))
-        upper, theta, _ = _two_bone(base, targets[f"{s}_ankle"], pole, hum.thigh, hum.shin, -1.0)
-        local[:, idx[f"{s}_hip"]] = R.multiply(R.conjugate(root_rot), upper)
-        local[:, idx[f"{s}_knee"]] = R.from_axis_angle(_Z, theta)
-        shin = R.multiply(upper, local[:, idx[f"{s}_knee"]])
-        local[:, idx[f"{s}_ankle"]] = R.multiply(R.conjugate(shin), foot_rot[s])
-        # arms: the source hand relative to its shoulder, scaled to the humanoid's arm, at its shoulder
-        sh = chest_pos + R.rotate(H["chest"], np.broadcast_to(off[idx[f"{s}_shoulder"]], root_pos.shape))
-        rel = P[:, j[f"{s}_wrist"]] - P[:, j[f"{s}_shoulder"]]
-        hand = sh + arm_scale * rel
-        scaled[f"{s}_wrist"] = hand
-        if ground:  # a hand on the floor: the wrist sphere rests on it
-            hand = hand.copy()
-            hand[:, 1] = np.maximum(hand[:, 1], hum.hand_radius)
-        targets[f"{s}_wrist"] = hand
-        pole = R.rotate(H[f"{s}_shoulder"], np.broadcast_to(_Z, root_pos.shape))
-        upper, theta, _ = _two_bone(sh, hand, pole, hum.upper_arm, hum.forearm, 1.0)
-        local[:, idx[f"{s}_shoulder"]] = R.multiply(R.conjugate(H["chest"]), upper)
-        local[:, idx[f"{s}_elbow"]] = R.from_axis_angle(_Z, theta)
-    clip = Clip(
-        name=name,
-        fps=src.fps,
-        root_pos=root_pos,
-        local_rot=R.continuous_sign(R.normalize(local)),
-        loop=False,
-        label=label,
-        source=src.path,
-        skeleton=skel,
-    )
-    return clip, targets, scaled, stance
+def _solve_leg(
+    s: str,
+    local: np.ndarray,
+    root_pos: np.ndarray,
+    root_rot: np.ndarray,
+    H: dict,
+    ankle_target: np.ndarray,
+    foot_rot: np.ndarray,
+    hum: _Humanoid,
+) -> None:
+    """Side `s`'s hip, knee and ankle local rotations into `local` (T, bodies, 4): two-bone IK from
+    the hip to `ankle_target` (bend sign -1, pole from the source hip), the foot keeping
+    its source world rotation."""
+    idx, off = hum.idx, hum.skel.offsets
+    base = root_pos + R.rotate(root_rot, np.broadcast_to(off[idx[f"{s}_hip"]], root_pos.shape))
+    pole = R.rotate(H[f"{s}_hip"], np.broadcast_to(_Z, root_pos.shape))
+    upper, theta, _ = _two_bone(base, ankle_target, pole, hum.thigh, hum.shin, -1.0)
+    local[:, idx[f"{s}_hip"]] = R.multiply(R.conjugate(root_rot), upper)
+    local[:, idx[f"{s}_knee"]] = R.from_axis_angle(_Z, theta)
+    shin = R.multiply(upper, local[:, idx[f"{s}_knee"]])
+    local[:, idx[f"{s}_ankle"]] = R.multiply(R.conjugate(shin), foot_rot)
+
+
+def _solve_arm(s: str, local: np.ndarray, shoulder: np.ndarray, hand: np.ndarray, H: dict, hum: _Humanoid) -> None:
+    """Side `s`'s shoulder and elbow local rotations into `local`: two-bone IK from the shoulder
+    position (m, world) to `hand` (bend sign +1, pole from the source shoulder)."""
+    idx = hum.idx
+    pole = R.rotate(H[f"{s}_shoulder"], np.broadcast_to(_Z, shoulder.shape))
+    upper, theta, _ = _two_bone(shoulder, hand, pole, hum.upper_arm, hum.forearm, 1.0)
+    local[:, idx[f"{s}_shoulder"]] = R.multiply(R.conjugate(H["chest"]), upper)
+    local[:, idx[f"{s}_elbow"]] = R.from_axis_angle(_Z, theta)
