@@ -192,66 +192,94 @@ class Config(BaseConfig):
     def check(cfg) -> str | None:
         """Cross-field checks; returns a message or None. validate has checked each field's declared
         choices and range (charctl.config_fields.check_fields) before; the choices are checked here again for
-        callers of check alone."""
+        callers of check alone. The groups run in order and the first problem found is reported."""
         if (msg := check_fields(cfg, Config, ranges=False)) is not None:  # declared choices (direct callers too)
             return msg
-        if not cfg.skills:
-            return "skills must list at least one skill"
-        names = [s.name for s in cfg.skills]
-        unknown = [n for n in cfg.use_skills if n not in names]
-        if unknown:
-            return f"use_skills names unknown skill(s) {unknown}; skills are {names}"
-        if len(set(names)) != len(names):
-            return f"skill names must be unique, got {names}"
-        if (msg := check_ppo(cfg.ppo)) is not None:
-            return msg
-        if not 0.0 <= cfg.reward.low_style_threshold < 1.0 or cfg.reward.low_style_steps < 1:
-            return "reward.low_style_threshold must lie in [0, 1) and reward.low_style_steps be >= 1"
-        if cfg.reward.low_style_threshold > 0 and (cfg.env.backend != "cpu" or cfg.reward.kind != "adversarial"):
-            return "reward.low_style_threshold > 0 needs env.backend=cpu and reward.kind=adversarial"
-        if cfg.reward.pose_error_threshold < 0 or cfg.reward.pose_error_grace_steps < 0:
-            return "reward.pose_error_threshold and reward.pose_error_grace_steps must be >= 0"
-        if cfg.reward.pose_error_threshold > 0 and (cfg.env.backend != "cpu" or cfg.reward.kind != "adversarial"):
-            return "reward.pose_error_threshold > 0 needs env.backend=cpu and reward.kind=adversarial"
-        if cfg.reward.w_track < 0 or (cfg.reward.w_track > 0 and cfg.reward.pose_error_threshold <= 0):
-            return "reward.w_track must be >= 0, and > 0 only with reward.pose_error_threshold > 0 (its reference)"
-        n_skills = len(cfg.use_skills) if cfg.use_skills else len(cfg.skills)
-        if cfg.reward.kind == "tracking" and n_skills > 1 and cfg.env.switch_prob > 0:
-            return (
-                "reward.kind=tracking over several skills needs env.switch_prob=0: the reference phase belongs to "
-                "the clip an episode started with (the multi-skill tracking baseline holds one command per episode)"
-            )
-        if cfg.disc.style_head == "per_skill" and not cfg.cgail.conditional:
-            return "disc.style_head=per_skill needs cgail.conditional=true (it scores pairs for their command)"
-        if not 0.0 <= cfg.disc.wrong_skill_fakes < 1.0:
-            return f"disc.wrong_skill_fakes must lie in [0, 1), got {cfg.disc.wrong_skill_fakes}"
-        if cfg.disc.wrong_skill_fakes > 0 and cfg.disc.style_head != "per_skill":
-            return "disc.wrong_skill_fakes needs disc.style_head=per_skill"
-        ratio = cfg.env.physics_hz / cfg.env.control_hz
-        if abs(ratio - round(ratio)) > 1e-6:
-            return f"env.physics_hz ({cfg.env.physics_hz}) must be a multiple of env.control_hz ({cfg.env.control_hz})"
-        if not 0.0 <= cfg.env.curriculum_start_seconds <= cfg.env.episode_seconds:
-            return (
-                f"env.curriculum_start_seconds ({cfg.env.curriculum_start_seconds}) must lie in "
-                f"[0, env.episode_seconds ({cfg.env.episode_seconds})]"
-            )
-        if cfg.env.curriculum_samples < 1:
-            return "env.curriculum_samples must be >= 1"
-        if not 0.0 <= cfg.env.skill_fall_weight <= 1.0:
-            return f"env.skill_fall_weight must lie in [0, 1], got {cfg.env.skill_fall_weight}"
-        if cfg.env.skill_fall_halflife <= 0:
-            return f"env.skill_fall_halflife must be > 0 episodes, got {cfg.env.skill_fall_halflife}"
-        if cfg.env.skill_fall_weight > 0 and cfg.env.backend != "cpu":
-            return "env.skill_fall_weight > 0 is implemented for env.backend=cpu only"
-        if cfg.train.fidelity_every < 0:
-            return "train.fidelity_every must be >= 0 samples (0 = off)"
-        if cfg.train.keep_checkpoint_every < 0:
-            return "train.keep_checkpoint_every must be >= 0 samples (0 = keep only last.pt)"
-        if cfg.env.ramp_frames < 0:
-            return "env.ramp_frames must be >= 0"
-        if cfg.env.backend == "warp":
-            import importlib.util
-
-            if importlib.util.find_spec("mujoco_warp") is None:
-                return "env.backend=warp needs MuJoCo Warp: pip install -e '.[gpu]' (README, section GPU)"
+        for group in (_check_skills, _check_rewards, _check_disc, _check_env, _check_train):
+            if (msg := group(cfg)) is not None:
+                return msg
         return None
+
+
+def _check_skills(cfg) -> str | None:
+    """The skill list, use_skills and the PPO section."""
+    if not cfg.skills:
+        return "skills must list at least one skill"
+    names = [s.name for s in cfg.skills]
+    unknown = [n for n in cfg.use_skills if n not in names]
+    if unknown:
+        return f"use_skills names unknown skill(s) {unknown}; skills are {names}"
+    if len(set(names)) != len(names):
+        return f"skill names must be unique, got {names}"
+    return check_ppo(cfg.ppo)
+
+
+def _check_rewards(cfg) -> str | None:
+    """The early terminations, the tracking reward and the multi-skill tracking baseline."""
+    r = cfg.reward
+    if not 0.0 <= r.low_style_threshold < 1.0 or r.low_style_steps < 1:
+        return "reward.low_style_threshold must lie in [0, 1) and reward.low_style_steps be >= 1"
+    if r.low_style_threshold > 0 and (cfg.env.backend != "cpu" or r.kind != "adversarial"):
+        return "reward.low_style_threshold > 0 needs env.backend=cpu and reward.kind=adversarial"
+    if r.pose_error_threshold < 0 or r.pose_error_grace_steps < 0:
+        return "reward.pose_error_threshold and reward.pose_error_grace_steps must be >= 0"
+    if r.pose_error_threshold > 0 and (cfg.env.backend != "cpu" or r.kind != "adversarial"):
+        return "reward.pose_error_threshold > 0 needs env.backend=cpu and reward.kind=adversarial"
+    if r.w_track < 0 or (r.w_track > 0 and r.pose_error_threshold <= 0):
+        return "reward.w_track must be >= 0, and > 0 only with reward.pose_error_threshold > 0 (its reference)"
+    n_skills = len(cfg.use_skills) if cfg.use_skills else len(cfg.skills)
+    if r.kind == "tracking" and n_skills > 1 and cfg.env.switch_prob > 0:
+        return (
+            "reward.kind=tracking over several skills needs env.switch_prob=0: the reference phase belongs to "
+            "the clip an episode started with (the multi-skill tracking baseline holds one command per episode)"
+        )
+    return None
+
+
+def _check_disc(cfg) -> str | None:
+    """The per-skill style head and its wrong-skill fakes."""
+    if cfg.disc.style_head == "per_skill" and not cfg.cgail.conditional:
+        return "disc.style_head=per_skill needs cgail.conditional=true (it scores pairs for their command)"
+    if not 0.0 <= cfg.disc.wrong_skill_fakes < 1.0:
+        return f"disc.wrong_skill_fakes must lie in [0, 1), got {cfg.disc.wrong_skill_fakes}"
+    if cfg.disc.wrong_skill_fakes > 0 and cfg.disc.style_head != "per_skill":
+        return "disc.wrong_skill_fakes needs disc.style_head=per_skill"
+    return None
+
+
+def _check_env(cfg) -> str | None:
+    """Physics and control rates, the episode curriculum, fall-weighted commands and the ramp."""
+    env = cfg.env
+    ratio = env.physics_hz / env.control_hz
+    if abs(ratio - round(ratio)) > 1e-6:
+        return f"env.physics_hz ({env.physics_hz}) must be a multiple of env.control_hz ({env.control_hz})"
+    if not 0.0 <= env.curriculum_start_seconds <= env.episode_seconds:
+        return (
+            f"env.curriculum_start_seconds ({env.curriculum_start_seconds}) must lie in "
+            f"[0, env.episode_seconds ({env.episode_seconds})]"
+        )
+    if env.curriculum_samples < 1:
+        return "env.curriculum_samples must be >= 1"
+    if not 0.0 <= env.skill_fall_weight <= 1.0:
+        return f"env.skill_fall_weight must lie in [0, 1], got {env.skill_fall_weight}"
+    if env.skill_fall_halflife <= 0:
+        return f"env.skill_fall_halflife must be > 0 episodes, got {env.skill_fall_halflife}"
+    if env.skill_fall_weight > 0 and env.backend != "cpu":
+        return "env.skill_fall_weight > 0 is implemented for env.backend=cpu only"
+    return None
+
+
+def _check_train(cfg) -> str | None:
+    """Fidelity logging, kept checkpoints, the ramp and the Warp backend's availability."""
+    if cfg.train.fidelity_every < 0:
+        return "train.fidelity_every must be >= 0 samples (0 = off)"
+    if cfg.train.keep_checkpoint_every < 0:
+        return "train.keep_checkpoint_every must be >= 0 samples (0 = keep only last.pt)"
+    if cfg.env.ramp_frames < 0:
+        return "env.ramp_frames must be >= 0"
+    if cfg.env.backend == "warp":
+        import importlib.util
+
+        if importlib.util.find_spec("mujoco_warp") is None:
+            return "env.backend=warp needs MuJoCo Warp: pip install -e '.[gpu]' (README, section GPU)"
+    return None

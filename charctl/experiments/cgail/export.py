@@ -146,37 +146,46 @@ def export(target: str, options: dict, overrides: list[str]) -> None:
     if options.get("torchscript"):
         print(f"wrote {export_torchscript(tr, Path(options['torchscript']))}")
     if options.get("bvh") or options.get("video"):
-        seconds = float(options.get("seconds") or (schedule[-1][0] + 3.0))
-        qpos, stats = schedule_rollout(tr, schedule, seconds)
-        if options.get("bvh"):
-            from charctl.motion.bvh import write_bvh
-            from charctl.motion.clip import Clip
-            from charctl.sim.humanoid import qpos_to_local_rot
-
-            root, rot = qpos_to_local_rot(qpos)
-            clip = Clip(name="cgail_rollout", fps=stats["fps"], root_pos=root, local_rot=rot)
-            print(f"wrote {write_bvh(clip, options['bvh'])} ({len(qpos)} frames, falls: {stats['falls']})")
-        if options.get("video"):
-            from charctl.sim.humanoid import load_model
-            from charctl.viz.video import render_qpos
-
-            info = render_qpos(
-                load_model(tr.cfg.env.physics_hz, armature=tr.cfg.env.armature), qpos, options["video"], stats["fps"]
-            )
-            print(f"wrote {options['video']} ({info['frames']} frames, falls: {stats['falls']})")
+        _write_rollout(tr, schedule, options)
     if options.get("web"):
-        from charctl.experiments.cgail.web_site import serve, write_site
+        _write_web(tr, options)
 
-        out = Path(options["web"])
-        info = write_site(tr, out, options.get("checkpoint"))
-        how = (
-            ""
-            if options.get("serve")
-            else f": serve it with any static file server, e.g. python3 -m http.server -d {out}"
+
+def _write_rollout(tr, schedule: list[tuple[float, str]], options: dict) -> None:
+    """--bvh / --video: one rollout of the command schedule (seconds, skill) for --seconds (default: the last
+    switch + 3 s), written as a BVH clip at the control rate and/or an MP4."""
+    seconds = float(options.get("seconds") or (schedule[-1][0] + 3.0))
+    qpos, stats = schedule_rollout(tr, schedule, seconds)
+    if options.get("bvh"):
+        from charctl.motion.bvh import write_bvh
+        from charctl.motion.clip import Clip
+        from charctl.sim.humanoid import qpos_to_local_rot
+
+        root, rot = qpos_to_local_rot(qpos)
+        clip = Clip(name="cgail_rollout", fps=stats["fps"], root_pos=root, local_rot=rot)
+        print(f"wrote {write_bvh(clip, options['bvh'])} ({len(qpos)} frames, falls: {stats['falls']})")
+    if options.get("video"):
+        from charctl.sim.humanoid import load_model
+        from charctl.viz.video import render_qpos
+
+        info = render_qpos(
+            load_model(tr.cfg.env.physics_hz, armature=tr.cfg.env.armature), qpos, options["video"], stats["fps"]
         )
-        print(f"wrote {out} ({info['files']} files, {info['bytes'] / 1e6:.1f} MB){how}")
-        if options.get("serve"):
-            serve(out)
+        print(f"wrote {options['video']} ({info['frames']} frames, falls: {stats['falls']})")
+
+
+def _write_web(tr, options: dict) -> None:
+    """--web DIR: the interactive web demo's site (--serve: then serve it)."""
+    from charctl.experiments.cgail.web_site import serve, write_site
+
+    out = Path(options["web"])
+    info = write_site(tr, out, options.get("checkpoint"))
+    how = (
+        "" if options.get("serve") else f": serve it with any static file server, e.g. python3 -m http.server -d {out}"
+    )
+    print(f"wrote {out} ({info['files']} files, {info['bytes'] / 1e6:.1f} MB){how}")
+    if options.get("serve"):
+        serve(out)
 
 
 def _display_problem() -> str | None:
