@@ -162,3 +162,34 @@ def test_w_track_needs_the_pose_error_reference():
     assert "reward.w_track" in Config.check(cfg)
     cfg = OmegaConf.merge(cfg, {"reward": {"pose_error_threshold": 0.5}})
     assert Config.check(cfg) is None
+
+
+def test_phase_obs_puts_the_timed_reference_phase_in_the_state(skills):
+    """env.phase_obs: (cos, sin) of the kick's reference frame appended to the state, advancing one frame per
+    control step from the RSI frame even without a pose-error check; (0, 0) for walk (heading goal) and while
+    a switch's ramp runs; the state grows by 2 and nothing else in it changes."""
+    cfg = OmegaConf.structured(EnvConfig(num_envs=2, ramp_frames=4, switch_prob=0.0, phase_obs=True))
+    env = CgailEnv(skills, cfg, seed=0)
+    plain = _env(skills, threshold=0.0)
+    assert env.state_dim == plain.state_dim + 2
+    for e in (env, plain):
+        e.forced_command = np.array([0, 1])
+        e.start_frame = 5
+        e.reset(np.arange(2))
+    frames = len(skills[1].obs) - 1
+    angle = 2 * np.pi * 5 / frames
+    assert env.state[:, -2:] == pytest.approx(np.array([[0.0, 0.0], [np.cos(angle), np.sin(angle)]]))
+    assert np.array_equal(env.state[:, :-2], plain.state)  # same physics, same seed
+    env.step(np.zeros((2, 28)))
+    angle = 2 * np.pi * 6 / frames
+    assert env.state[1, -2:] == pytest.approx([np.cos(angle), np.sin(angle)])
+    env.set_command(np.array([1]), 0)  # kick -> walk: a heading goal, so no phase
+    env.set_command(np.array([0]), 1)  # walk -> kick: no phase until the ramp ends, then frame 0
+    env.step(np.zeros((2, 28)))
+    assert env.state[:, -2:] == pytest.approx(np.zeros((2, 2)))
+    for _ in range(3):  # the ramp ends in the 4th step: the reference starts at frame 0 after that step's state
+        env.step(np.zeros((2, 28)))
+    assert env.ref_frame[0] == 0 and env.state[0, -2:] == pytest.approx([0.0, 0.0])
+    env.step(np.zeros((2, 28)))
+    angle = 2 * np.pi * 1 / frames
+    assert env.ref_frame[0] == 1 and env.state[0, -2:] == pytest.approx([np.cos(angle), np.sin(angle)])

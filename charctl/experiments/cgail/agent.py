@@ -79,7 +79,7 @@ def build_agent(cfg, device: str = "cpu", training: bool = True) -> Agent:
     skills = load_skills(select_skills(cfg), cfg.env.control_hz, cfg.disc.demo_oversample)
     K = len(skills)
     conditional = bool(cfg.cgail.conditional)
-    state_dim = STATE_DIM + GOAL_DIM + (PHASE_DIM if cfg.reward.kind == "tracking" else 0)
+    state_dim = STATE_DIM + GOAL_DIM + (PHASE_DIM if cfg.reward.kind == "tracking" or cfg.env.phase_obs else 0)
     model = ActorCritic(state_dim, 28, cfg.ppo, cond_dim=K if conditional else 0).to(device)
     if not training:
         disc = _discriminator(cfg, 2 * DISC_OBS_DIM, K).to(device)  # its normaliser comes from the checkpoint

@@ -80,6 +80,12 @@ class EnvConfig:
     goal_max_angle_deg: float = 45.0  # new heading goals lie within +- this angle of the current heading
     # r_G = exp(-sharpness * (v_target - d . v_xz)^2), v_target = the clip's mean speed
     goal_sharpness: float = ranged(2.0, gt=0)
+    # The clip phase in the policy state (cos, sin of the timed reference frame), as the tracking baseline has it:
+    # with reward.pose_error_threshold the episode ends when the character leaves the clip's timed reference, and a
+    # policy that sees only its pose and the command cannot tell when a kick that restarts from the guard is due.
+    # (0, 0) for skills with a heading goal (their reference is the closest frame) and during a command ramp.
+    # false = the paper's state (command only). CPU env only. docs/cgail.md, "Run H".
+    phase_obs: bool = False
     # cpu (C MuJoCo, numpy) | warp (MuJoCo Warp on `device`, README "GPU") | auto (warp on CUDA)
     backend: Annotated[str, Literal["cpu", "warp", "auto"]] = "cpu"
 
@@ -277,6 +283,8 @@ def _check_train(cfg) -> str | None:
         return "train.keep_checkpoint_every must be >= 0 samples (0 = keep only last.pt)"
     if cfg.env.ramp_frames < 0:
         return "env.ramp_frames must be >= 0"
+    if cfg.env.backend == "warp" and cfg.env.phase_obs:
+        return "env.phase_obs needs the CPU env (env.backend=cpu)"
     if cfg.env.backend == "warp":
         import importlib.util
 

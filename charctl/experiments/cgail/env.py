@@ -128,6 +128,9 @@ class CgailEnv:
         self.pose_threshold, self.pose_grace = float(pose_error_threshold), int(pose_error_grace_steps)
         self.reference_reward = bool(reference_reward)  # r_track against that reference (reward.w_track)
         self.cfg = env_cfg = plain_section(env_cfg)  # typed fields, cheap reads in the step loop
+        # env.phase_obs: the timed reference's phase in the state of the adversarial policy (training and evaluation)
+        self.phase_obs = bool(getattr(env_cfg, "phase_obs", False)) and not tracking
+        self.timed_reference = self.pose_threshold > 0 or self.phase_obs  # reference advanced, restarting at frame 0
         self.K = len(skills)
         self.conditional = conditional
         self.rng = np.random.default_rng(seed)
@@ -153,7 +156,7 @@ class CgailEnv:
         self.ref_grace = np.zeros(self.N, dtype=np.int64)  # pose-error check: steps left without a check
         self.clip_frames = np.array([len(sk.obs) for sk in skills])
         self.clip_loops = np.array([sk.loop for sk in skills])
-        self.state_dim = STATE_DIM + GOAL_DIM + (PHASE_DIM if tracking else 0)
+        self.state_dim = STATE_DIM + GOAL_DIM + (PHASE_DIM if tracking or self.phase_obs else 0)
         self.obs_dim = self.state_dim
         self.episode_return_goal = np.zeros(self.N)
         self.fall_count = 0
@@ -247,16 +250,20 @@ class CgailEnv:
         return g * self.has_goal[self.cmd[rows]][:, None]
 
     def _phase_features(self, rows: np.ndarray | slice = slice(None)) -> np.ndarray:
-        """(n, 2) cos/sin of the reference clip phase of envs `rows` (tracking baseline)."""
+        """(n, 2) cos/sin of the reference clip phase of envs `rows` (tracking baseline, env.phase_obs). With
+        env.phase_obs it is (0, 0) for skills with a heading goal and while the reference waits for a ramp."""
         frame, cmd = self.ref_frame[rows], self.cmd[rows]
         phase = 2.0 * np.pi * frame / np.maximum(self.clip_frames[cmd] - 1, 1)
-        return np.stack([np.cos(phase), np.sin(phase)], axis=1)
+        out = np.stack([np.cos(phase), np.sin(phase)], axis=1)
+        if self.phase_obs:
+            out *= (~self.has_goal[cmd] & self.ref_active[rows])[:, None]
+        return out
 
     def _features(self, k, rows: np.ndarray | slice = slice(None)) -> tuple[np.ndarray, np.ndarray]:
         """(policy state, disc obs) of envs `rows` whose kinematics are `k`, sharing one heading frame."""
         f = heading_frame(k)
         parts = [policy_state(k, f), self._goal_features(k, rows)]
-        if self.tracking:
+        if self.tracking or self.phase_obs:
             parts.append(self._phase_features(rows))
         return np.concatenate(parts, axis=1), disc_obs(k, f)
 
@@ -328,7 +335,7 @@ class CgailEnv:
         r_track = np.zeros(self.N)
         if self.tracking:  # the phase in the state is the new one
             ref, clip_ended = self._advance_phase()
-        elif self.pose_threshold > 0:
+        elif self.timed_reference:
             ref, _ = self._advance_phase(restart=True)
         final_state, pair_next = self._features(k)
         if self.tracking:
@@ -354,7 +361,7 @@ class CgailEnv:
         state, obs = final_state.copy(), pair_next.copy()
         self._state, self._obs = state, obs
         self._advance_ramp()
-        if self.pose_threshold > 0:
+        if self.timed_reference:
             self._restart_reference_after_ramp()
         if done.size:
             self.reset(done)

@@ -105,6 +105,11 @@ class WebGraph(nn.Module):
                 f"{tr.run_dir} is a tracking run: its policy needs the reference clip's phase, which the web demo "
                 "does not play; export a cgail (adversarial) run"
             )
+        if getattr(tr.cfg.env, "phase_obs", False):
+            raise CharctlError(
+                f"{tr.run_dir} was trained with env.phase_obs=true: its policy needs the reference clip's phase, "
+                "which the web demo does not play yet; export a run trained without it"
+            )
         skel = load_skeleton()
         body_ids = np.array([model.body(n).id for n in skel.names])
         self.register_buffer("body_ids", torch.as_tensor(body_ids))
