@@ -23,7 +23,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from charctl.config_fields import _field_type, check_fields, ranged
+from charctl.config_fields import check_fields, field_type, ranged
 from charctl.errors import CharctlError
 
 
@@ -212,7 +212,7 @@ def _schema_keys(schema: type, prefix: str = "") -> set[str]:
     keys: set[str] = set()
     for f in dataclasses.fields(schema):
         keys.add(prefix + f.name)
-        sub = _field_type(f)
+        sub = field_type(f)
         if dataclasses.is_dataclass(sub):
             keys |= _schema_keys(sub, f"{prefix}{f.name}.")
     return keys
@@ -274,9 +274,9 @@ def _valid_keys(schema: type | None, key: str) -> str:
     prefix = []
     for part in parts[:-1]:
         f = {x.name: x for x in dataclasses.fields(node)}.get(part)
-        if f is None or not dataclasses.is_dataclass(_field_type(f)):
+        if f is None or not dataclasses.is_dataclass(field_type(f)):
             break
-        node = _field_type(f)
+        node = field_type(f)
         prefix.append(part)
     names = ", ".join(f.name for f in dataclasses.fields(node))
     where = ".".join(prefix) or "top level"

@@ -125,7 +125,7 @@ def check_fields(cfg, schema: type, prefix: str = "", ranges: bool = True) -> st
         if value is _ABSENT:
             continue
         key = prefix + f.name
-        sub = _field_type(f)
+        sub = field_type(f)
         if dataclasses.is_dataclass(sub):
             problem = check_fields(value, sub, key + ".", ranges)
         elif _is_list(value):
@@ -164,7 +164,7 @@ def _list_element_type(f: dataclasses.Field) -> Any:
     return None
 
 
-def _field_type(f: dataclasses.Field) -> Any:
+def field_type(f: dataclasses.Field) -> Any:
     if f.default_factory is not dataclasses.MISSING:  # type: ignore[misc]
         try:
             return type(f.default_factory())  # type: ignore[misc]

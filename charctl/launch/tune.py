@@ -30,8 +30,8 @@ from pathlib import Path
 from charctl.errors import CharctlError, Interrupted
 from charctl.launch.tune_outputs import write_outputs
 from charctl.launch.tune_setup import BIG_T, TrialRecord, TuneSetup
-from charctl.launch.tune_trial import _trial_dirname, trial_class, wait_for_children
-from charctl.launch.tune_view import _callback, _StopRequest, _View
+from charctl.launch.tune_trial import trial_class, trial_dirname, wait_for_children
+from charctl.launch.tune_view import StopRequest, TuneView, tune_callback
 
 
 # ---------------------------------------------------------------------------- driver
@@ -43,7 +43,7 @@ def run_tune(setup: TuneSetup) -> tuple[list[TrialRecord], TrialRecord | None]:
     tune = import_tune()
     out = Path(setup.out_dir)
     labels = ["(not sampled yet)"] * setup.settings.trials
-    stop = _StopRequest()
+    stop = StopRequest()
     with ray_session(setup.settings.address, "charctl tune") as ray:
         print(
             f"tune {setup.experiment}: {setup.settings.trials} trial(s), {setup.metric} ({setup.mode}), ASHA; "
@@ -52,7 +52,7 @@ def run_tune(setup: TuneSetup) -> tuple[list[TrialRecord], TrialRecord | None]:
         os.environ.setdefault("RAY_AIR_NEW_OUTPUT", "0")  # Tune's own progress tables off (verbose=0): ours instead
         columns = (setup.metric, "reports")
         with JobTable(f"tune {setup.experiment}", labels, extra_columns=columns, final_table=False) as table:
-            view = _View(setup, table, stop)
+            view = TuneView(setup, table, stop)
             tuner = _make_tuner(tune, setup, view, out)
             with stop.installed():
                 try:
@@ -68,7 +68,7 @@ def run_tune(setup: TuneSetup) -> tuple[list[TrialRecord], TrialRecord | None]:
     return records, best
 
 
-def _make_tuner(tune, setup: TuneSetup, view: _View, out: Path):
+def _make_tuner(tune, setup: TuneSetup, view: TuneView, out: Path):
     """The `tune.Tuner`: random search (seeded) with ASHA, one CharctlTrial per sample, Tune's records
     under `out/ray/`, no Tune checkpoints (each child run writes its own) and no retries."""
     from ray.tune.schedulers import ASHAScheduler
@@ -91,20 +91,20 @@ def _make_tuner(tune, setup: TuneSetup, view: _View, out: Path):
                 reduction_factor=4,
             ),
             search_alg=BasicVariantGenerator(random_state=setup.settings.seed),
-            trial_dirname_creator=_trial_dirname,
+            trial_dirname_creator=trial_dirname,
         ),
         run_config=tune.RunConfig(
             name="ray",
             storage_path=str(out),
             verbose=0,
-            callbacks=[_callback(view)],
+            callbacks=[tune_callback(view)],
             failure_config=tune.FailureConfig(max_failures=0),
             checkpoint_config=tune.CheckpointConfig(checkpoint_frequency=0, checkpoint_at_end=False),
         ),
     )
 
 
-def _settle_final_states(view: _View) -> None:
+def _settle_final_states(view: TuneView) -> None:
     """Record the states Tune settled after the last callback (errored or terminated trials still
     shown as pending/running)."""
     for trial_id, rec in view.records.items():

@@ -117,7 +117,7 @@ def trial_class():
     return CharctlTrial
 
 
-def _trial_dirname(trial) -> str:
+def trial_dirname(trial) -> str:
     return trial.trial_id
 
 

@@ -12,10 +12,10 @@ from typing import Any
 from charctl.launch.tune_setup import TrialRecord, TuneSetup
 
 
-class _View:
+class TuneView:
     """Driver-side Tune callback: trial states into the live table and the TrialRecords."""
 
-    def __init__(self, setup: TuneSetup, table, stop: _StopRequest | None = None) -> None:
+    def __init__(self, setup: TuneSetup, table, stop: StopRequest | None = None) -> None:
         self.setup = setup
         self.table = table
         self.stop = stop
@@ -76,13 +76,13 @@ class _View:
         self.show(rec)
 
 
-def _callback(view: _View):
+def tune_callback(view: TuneView):
     """A Tune Callback forwarding trial events to `view` (Tune pickles its run config for restores:
     the view, with its live console, is left out of the pickle)."""
     from ray.tune import Callback
 
     class _Forward(Callback):
-        def __init__(self, view: _View | None) -> None:
+        def __init__(self, view: TuneView | None) -> None:
             self.view = view
 
         def __getstate__(self) -> dict:
@@ -127,7 +127,7 @@ def trial_error(trial) -> str:
     return (lines[-1] if len(lines) > 1 else lines[0])[:300]
 
 
-class _StopRequest:
+class StopRequest:
     """Ctrl-C / SIGTERM during the search: the first asks Tune to stop gracefully (through Tune's own
     SIGUSR1 handler; Tune's SIGINT handler is switched off so that charctl knows it happened): every
     running trial gets its SIGINT and writes its checkpoint. A further one aborts."""

@@ -126,10 +126,10 @@ def simulate(genomes: np.ndarray, s: Settings) -> tuple[Rollout | None, Params, 
     if len(rows) == 0:
         return None, p, c.code, rows
     ps, cs = p.take(rows), c.take(rows)
-    return _finish(ps, single_cycle_timeline(cs, ps, s), cs.code, s), p, c.code, rows
+    return finish_rollout(ps, single_cycle_timeline(cs, ps, s), cs.code, s), p, c.code, rows
 
 
-def _finish(p: Params, tl: Timeline, code: np.ndarray, s: Settings) -> Rollout:
+def finish_rollout(p: Params, tl: Timeline, code: np.ndarray, s: Settings) -> Rollout:
     bal = run_balance(tl, p.eta, s)
     legs = leg_points(tl, s)
     theta = np.concatenate([leg_joint_angles(tl, legs), bal.angles], -1)

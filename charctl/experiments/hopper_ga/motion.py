@@ -16,7 +16,7 @@ import numpy as np
 from charctl.errors import CharctlError
 from charctl.experiments.hopper_ga.body import dof_to_joint_angles, repeat_cycles
 from charctl.experiments.hopper_ga.hopper import leg_cycle, leg_lengths
-from charctl.experiments.hopper_ga.model import Rollout, _finish
+from charctl.experiments.hopper_ga.model import Rollout, finish_rollout
 from charctl.experiments.hopper_ga.settings import Settings, decode, describe_invalid
 from charctl.motion.bvh import write_bvh_file
 
@@ -52,7 +52,7 @@ def run_motion(genome: np.ndarray, s: Settings, cycles: int, limp_factor: float 
             )
     seq = [normal if i % 2 == 0 else limp for i in range(cycles)]
     tl = repeat_cycles(seq, p, s)
-    r = _finish(p, tl, np.zeros(1, dtype=np.int64), s)
+    r = finish_rollout(p, tl, np.zeros(1, dtype=np.int64), s)
     root = np.concatenate([tl.hip[0], np.zeros((tl.hip.shape[1], 1))], -1)
     return Motion(
         rollout=r,

@@ -41,10 +41,10 @@ from charctl.errors import CharctlError
 from charctl.motion import rotations as R
 from charctl.motion.bvh_any import read_source
 from charctl.motion.retarget.common import DEFAULT_FPS, Retargeted, humanoid
-from charctl.motion.retarget.ik import _solve
-from charctl.motion.retarget.orient import _transfer_orientations
-from charctl.motion.retarget.refine import _refine
-from charctl.motion.retarget.source import _contacts, _rebase_height, _resample, _scale, _turn_and_move
+from charctl.motion.retarget.ik import solve_clip
+from charctl.motion.retarget.orient import transfer_orientations
+from charctl.motion.retarget.refine import refine_clip
+from charctl.motion.retarget.source import foot_contacts, rebase_height, resample_source, scale_source, turn_and_move
 
 
 # ---------------------------------------------------------------------------- entry point
@@ -73,24 +73,26 @@ def retarget(
     hum = humanoid()
 
     t0 = time.perf_counter()
-    src = _resample(src, fps)
+    src = resample_source(src, fps)
     scale = hum.leg / src.leg_length()
-    src = _scale(src, scale)
-    contacts = _contacts(src)
-    H = _transfer_orientations(src, contacts)
+    src = scale_source(src, scale)
+    contacts = foot_contacts(src)
+    H = transfer_orientations(src, contacts)
     if ground:
-        src = _rebase_height(src, contacts, H, hum)
+        src = rebase_height(src, contacts, H, hum)
     times["transfer"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
     arm_scale = hum.arm / (src.arm_length())
-    clip, targets, scaled, contacts = _solve(src, H, contacts, hum, arm_scale, name or Path(path).stem, label, ground)
+    clip, targets, scaled, contacts = solve_clip(
+        src, H, contacts, hum, arm_scale, name or Path(path).stem, label, ground
+    )
     times["two_bone_ik"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
     refined, iters = 0, 0
     if refine:
-        clip, refined, iters = _refine(clip, targets, ground)
+        clip, refined, iters = refine_clip(clip, targets, ground)
     times["mink"] = time.perf_counter() - t0
     return _canonical(Retargeted(clip, src, scale, arm_scale, scaled, targets, contacts, refined, iters, times))
 
@@ -106,7 +108,7 @@ def _canonical(r: Retargeted) -> Retargeted:
         return R.rotate(np.broadcast_to(turn, p.shape[:-1] + (4,)), p - shift)
 
     r.clip = clip.canonicalize(0)
-    r.source = _turn_and_move(r.source, turn, shift)
+    r.source = turn_and_move(r.source, turn, shift)
     r.targets = {k: move(v) for k, v in r.targets.items()}
     r.scaled_source = {k: move(v) for k, v in r.scaled_source.items()}
     return r

@@ -45,7 +45,7 @@ class Retargeted:
 
 
 @dataclass(frozen=True)
-class _Humanoid:
+class RetargetHumanoid:
     """The humanoid's rest-pose numbers the retargeting uses."""
 
     skel: object
@@ -67,14 +67,14 @@ class _Humanoid:
         return self.upper_arm + self.forearm
 
 
-def humanoid() -> _Humanoid:
+def humanoid() -> RetargetHumanoid:
     skel = load_skeleton()
     idx = {n: i for i, n in enumerate(skel.names)}
     off = skel.offsets
     g = skel.geoms[idx["right_ankle"]]
     half, centre = np.array(g.size), np.array(g.pos)
     corners = centre + half * np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)])
-    return _Humanoid(
+    return RetargetHumanoid(
         skel,
         idx,
         float(np.linalg.norm(off[idx["right_knee"]])),

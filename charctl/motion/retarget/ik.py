@@ -17,14 +17,16 @@ from charctl.motion.retarget.common import (
     SIDES,
     STANCE_HEIGHT,
     STANCE_SPEED,
-    _Humanoid,
+    RetargetHumanoid,
 )
-from charctl.motion.retarget.orient import _unit
-from charctl.motion.retarget.source import _clean, _runs
+from charctl.motion.retarget.orient import unit_and_norm
+from charctl.motion.retarget.source import clean_mask, true_runs
 
 
 # ---------------------------------------------------------------------------- targets and two-bone IK
-def _plant_feet(ankle: np.ndarray, foot_rot: np.ndarray, hum: _Humanoid, fps: float) -> tuple[np.ndarray, np.ndarray]:
+def _plant_feet(
+    ankle: np.ndarray, foot_rot: np.ndarray, hum: RetargetHumanoid, fps: float
+) -> tuple[np.ndarray, np.ndarray]:
     """Ankle target (T, 3) that plants the foot: (T,) stance frames and the target.
 
     The humanoid's foot box is placed at the scaled source ankle with the transferred orientation. A stance
@@ -41,13 +43,13 @@ def _plant_feet(ankle: np.ndarray, foot_rot: np.ndarray, hum: _Humanoid, fps: fl
     lowest = ankle + rel[np.arange(T), low]
     speed = np.linalg.norm(np.gradient(lowest[:, [0, 2]], 1.0 / fps, axis=0), axis=-1)
     raw = (lowest[:, 1] < STANCE_HEIGHT) & (speed < STANCE_SPEED)
-    stance = _clean(raw, max(1, int(round(CONTACT_MIN_S * fps))))
+    stance = clean_mask(raw, max(1, int(round(CONTACT_MIN_S * fps))))
 
     out = ankle.copy()
     out[:, 1] = np.where(stance, clear, np.maximum(ankle[:, 1], clear))
     offset = np.zeros((T, 2))
     nb = max(1, int(round(BLEND_S * fps)))
-    for a, b in _runs(stance):
+    for a, b in true_runs(stance):
         acc = np.zeros(2)
         prev = None
         for t in range(a, b):
@@ -87,15 +89,15 @@ def _two_bone(
     cos_inner = np.clip((l1 * l1 + l2 * l2 - d * d) / (2 * l1 * l2), -1.0, 1.0)
     theta = sign * (np.pi - np.arccos(cos_inner))
     v_loc = np.stack([l2 * np.sin(theta), -l1 - l2 * np.cos(theta), np.zeros_like(theta)], axis=-1)
-    e1, _ = _unit(v_loc)
+    e1, _ = unit_and_norm(v_loc)
     e2 = np.broadcast_to(_Z, e1.shape)
-    f1, _ = _unit(D)
+    f1, _ = unit_and_norm(D)
     p = pole - np.sum(pole * f1, axis=-1, keepdims=True) * f1
-    f2, norm = _unit(p)
+    f2, norm = unit_and_norm(p)
     bad = norm < 1e-6
     if np.any(bad):  # pole along the limb: any perpendicular
         alt = np.cross(f1[bad], np.array([1.0, 0.0, 0.0]))
-        f2[bad] = _unit(alt)[0]
+        f2[bad] = unit_and_norm(alt)[0]
     E = np.stack([e1, e2, np.cross(e1, e2)], axis=-1)  # columns
     F = np.stack([f1, f2, np.cross(f1, f2)], axis=-1)
     upper = Rotation.from_matrix(F @ np.swapaxes(E, -1, -2)).as_quat()
@@ -125,7 +127,7 @@ def _root_drop(root: np.ndarray, rot: np.ndarray, targets: list[np.ndarray], off
     return np.maximum(smooth, need)
 
 
-def _solve(src, H, contacts, hum: _Humanoid, arm_scale: float, name: str, label: str, ground: bool = True):
+def solve_clip(src, H, contacts, hum: RetargetHumanoid, arm_scale: float, name: str, label: str, ground: bool = True):
     """The retargeted clip, the end-effector targets (m, world), the scaled source end effectors and
     the stance flags; `H`: the source's world rotations by humanoid joint name."""
     j = src.jmap.joints
@@ -168,7 +170,9 @@ def _solve(src, H, contacts, hum: _Humanoid, arm_scale: float, name: str, label:
     return clip, targets, scaled, stance
 
 
-def _ankle_targets(src, H, contacts: np.ndarray, hum: _Humanoid, ground: bool) -> tuple[dict, dict, dict, np.ndarray]:
+def _ankle_targets(
+    src, H, contacts: np.ndarray, hum: RetargetHumanoid, ground: bool
+) -> tuple[dict, dict, dict, np.ndarray]:
     """Per side: the source ankle (m, world), its IK target (planted on the ground when `ground`), the
     foot's world rotation, and the (T, 2) stance flags (recomputed by the planting when `ground`)."""
     j = src.jmap.joints
@@ -197,7 +201,7 @@ def _solve_leg(
     H: dict,
     ankle_target: np.ndarray,
     foot_rot: np.ndarray,
-    hum: _Humanoid,
+    hum: RetargetHumanoid,
 ) -> None:
     """Side `s`'s hip, knee and ankle local rotations into `local` (T, bodies, 4): two-bone IK from
     the hip to `ankle_target` (bend sign -1, pole from the source hip), the foot keeping
@@ -212,7 +216,9 @@ def _solve_leg(
     local[:, idx[f"{s}_ankle"]] = R.multiply(R.conjugate(shin), foot_rot)
 
 
-def _solve_arm(s: str, local: np.ndarray, shoulder: np.ndarray, hand: np.ndarray, H: dict, hum: _Humanoid) -> None:
+def _solve_arm(
+    s: str, local: np.ndarray, shoulder: np.ndarray, hand: np.ndarray, H: dict, hum: RetargetHumanoid
+) -> None:
     """Side `s`'s shoulder and elbow local rotations into `local`: two-bone IK from the shoulder
     position (m, world) to `hand` (bend sign +1, pole from the source shoulder)."""
     idx = hum.idx

@@ -9,11 +9,11 @@ from scipy.spatial.transform import Rotation
 from charctl.motion import rotations as R
 from charctl.motion.bvh_any import SourceMotion
 from charctl.motion.retarget.common import _Y, _Z, SIDES
-from charctl.motion.retarget.source import _toe
+from charctl.motion.retarget.source import toe_points
 
 
 # ---------------------------------------------------------------------------- orientation transfer
-def _unit(v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def unit_and_norm(v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     n = np.linalg.norm(v, axis=-1, keepdims=True)
     return v / np.maximum(n, 1e-9), n[..., 0]
 
@@ -25,7 +25,7 @@ def _alignment(q: np.ndarray, features: list[tuple[np.ndarray, np.ndarray, np.nd
     M = np.zeros((3, 3))
     qi = R.conjugate(q)
     for h, d, w in features:
-        s = R.rotate(qi, _unit(d)[0])
+        s = R.rotate(qi, unit_and_norm(d)[0])
         M += np.einsum("t,ti,j->ij", w, s, h / np.linalg.norm(h))
     U, _, Vt = np.linalg.svd(M)
     D = np.diag([1.0, 1.0, np.sign(np.linalg.det(U @ Vt)) or 1.0])
@@ -34,13 +34,13 @@ def _alignment(q: np.ndarray, features: list[tuple[np.ndarray, np.ndarray, np.nd
 
 def _hinge(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Hinge normal (b - a) x (c - b) per frame and its weight sin(bend)."""
-    u, _ = _unit(b - a)
-    v, _ = _unit(c - b)
+    u, _ = unit_and_norm(b - a)
+    v, _ = unit_and_norm(c - b)
     n = np.cross(u, v)
     return n, np.linalg.norm(n, axis=-1)
 
 
-def _transfer_orientations(src: SourceMotion, contacts: np.ndarray) -> dict[str, np.ndarray]:
+def transfer_orientations(src: SourceMotion, contacts: np.ndarray) -> dict[str, np.ndarray]:
     """World rotation (T, 4) of every humanoid body but the wrists: H_b = Q_j A_b."""
     j = src.jmap.joints
     P, Q, T = src.pos, src.rot, src.num_frames
@@ -84,7 +84,7 @@ def _transfer_orientations(src: SourceMotion, contacts: np.ndarray) -> dict[str,
         weak = 0.05 * ones
         put(f"{s}_hip", [(-_Y, knee - hip, ones), (-_Z, n, w), (_Z, pelvis_right, weak)])
         put(f"{s}_knee", [(-_Y, ankle - knee, ones), (-_Z, n, w), (_Z, pelvis_right, weak)])
-        toe = _toe(src, s)
+        toe = toe_points(src, s)
         fwd = toe - ankle
         flat = contacts[:, k].astype(float)
         if flat.sum() < 2:  # never in contact: the frames with the lowest toe stand in for flat ones

@@ -54,7 +54,7 @@ def ee_errors(clip: Clip, targets: dict[str, np.ndarray]) -> np.ndarray:
     return np.stack([np.linalg.norm(pos[:, sk.index(e)] - targets[e], axis=-1) for e in END_EFFECTORS], axis=1)
 
 
-def _refine(clip: Clip, targets: dict[str, np.ndarray], ground: bool = True, max_iters: int = 30):
+def refine_clip(clip: Clip, targets: dict[str, np.ndarray], ground: bool = True, max_iters: int = 30):
     """mink IK on the frames whose end effectors miss their targets or (`ground`) that go under the ground."""
     err = ee_errors(clip, targets).max(axis=1)
     low = lowest_points(clip).min(axis=1)
