@@ -3,6 +3,7 @@ that each evaluation mode appends its table to.
 
     rows = {"walk": {"error": 0.12, "falls": 0}, "run": {"error": 0.3, "falls": 1}}   # name -> column -> value
     markdown_table(rows, ["error", "falls"])       # | | error | falls |  ...  (cells: fmt_cell)
+    markdown_grid(["skill", "error"], [["walk", "0.12"]], align="-r")  # header + rows of cells, |---|---:|
     write_csv(out / "t.csv", rows, ["error", "falls"], index="skill")
     write_json(out / "t.json", {"table": rows})    # numpy values converted, NaN / inf -> null
     append_report(out, "Title", markdown_table(rows, cols), "how it was measured", header="# my report\n")
@@ -13,6 +14,7 @@ from __future__ import annotations
 import csv
 import io
 import json
+from collections.abc import Iterable, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -31,7 +33,7 @@ def fmt_cell(v) -> str:
 
 def markdown_table(rows: dict, cols: list[str]) -> str:
     """rows: name -> {column: value}; one Markdown row per name, the columns in `cols` order."""
-    lines = ["| | " + " | ".join(cols) + " |", "|---|" + "---|" * len(cols)]
+    lines = ["| | " + " | ".join(cols) + " |", markdown_rule(len(cols) + 1)]
     for name, row in rows.items():
         lines.append(f"| {name} | " + " | ".join(fmt_cell(row.get(c)) for c in cols) + " |")
     return "\n".join(lines)
@@ -40,6 +42,32 @@ def markdown_table(rows: dict, cols: list[str]) -> str:
 def markdown_row(cells) -> str:
     """One Markdown table row of the cells as str(): | a | b |."""
     return "| " + " | ".join(str(c) for c in cells) + " |"
+
+
+_ALIGN_RULES = {"-": "---", "l": ":---", "r": "---:", "c": ":---:"}  # markdown_rule's alignment letters
+
+
+def markdown_rule(columns: int, align: str = "") -> str:
+    """The separator row under a Markdown table's header, one `---` per column: |---|---:|.
+
+    `align` gives the columns' alignment, one letter each: '-' none (`---`), 'l' left (`:---`),
+    'r' right (`---:`), 'c' centred (`:---:`); columns past its end get none."""
+    if len(align) > columns or any(a not in _ALIGN_RULES for a in align):
+        raise ValueError(f"align {align!r}: at most {columns} of the letters {''.join(_ALIGN_RULES)}")
+    return "|" + "".join(_ALIGN_RULES[a] + "|" for a in align.ljust(columns, "-"))
+
+
+def markdown_grid(header: Sequence, rows: Iterable[Sequence], align: str = "") -> str:
+    """A Markdown table from its header and its rows as lists of cells in column order (no index
+    column, unlike `markdown_table`): each line as `markdown_row` writes it (cells as str(), so format
+    numbers first), the separator as `markdown_rule(len(header), align)` writes it; no final newline.
+
+        markdown_grid(["clip", "speed"], [["walk", "1.20"]], align="-r")
+        # '| clip | speed |\n|---|---:|\n| walk | 1.20 |'
+    """
+    lines = [markdown_row(header), markdown_rule(len(header), align)]
+    lines += [markdown_row(cells) for cells in rows]
+    return "\n".join(lines)
 
 
 def write_csv(path: Path, rows: dict, cols: list[str], index: str = "") -> None:

@@ -36,6 +36,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from charctl.errors import CharctlError
+from charctl.eval.report import markdown_grid
 
 RANKS = ("fidelity", "margin")  # --rank; the first is the default (the fidelity metric, where cgail has it)
 SECONDS = 5.0  # no-fall episode length without --survival
@@ -155,7 +156,7 @@ def write_report(run_dir: Path, rows: list[dict], chosen: dict | None, confirm: 
     skills = list(rows[0]["no_fall"])
     fid = bool(a.fidelity)
     lines = _report_head(run_dir, skills, a, fid)
-    lines += [_report_row(r, skills, a, fid) for r in rows]
+    lines += _report_table(rows, skills, a, fid).split("\n")
     lines.append("")
     lines.append("Cells: no-fall / diagonal" + (" / coverage." if fid else "."))
     if chosen is not None and confirm is not None:
@@ -166,8 +167,7 @@ def write_report(run_dir: Path, rows: list[dict], chosen: dict | None, confirm: 
 
 
 def _report_head(run_dir: Path, skills: list[str], a, fid: bool) -> list[str]:
-    """checkpoints.md's title, what the tests measure (episode lengths in s), the selection rule and the
-    table's header (one column per skill)."""
+    """checkpoints.md's title, what the tests measure (episode lengths in s) and the selection rule."""
     return [
         f"# Kept checkpoints of {run_dir.name}",
         "",
@@ -186,29 +186,31 @@ def _report_head(run_dir: Path, skills: list[str], a, fid: bool) -> list[str]:
         "Selection: the largest "
         + ("min coverage, then worst no-fall, then min diagonal." if a.rank == "fidelity" else "margin."),
         "",
-        "| samples | worst no-fall | min diagonal | min argmax acc. | "
-        + ("min coverage | " if fid else "")
-        + "meets both | "
-        + " | ".join(skills)
-        + " |",
-        "|---:|---:|---:|---:|" + ("---:|" if fid else "") + "---|" + "---|" * len(skills),
     ]
 
 
-def _report_row(r: dict, skills: list[str], a, fid: bool) -> str:
-    """One checkpoint's table row: its summary numbers, whether it meets both targets, per-skill cells."""
+def _report_table(rows: list[dict], skills: list[str], a, fid: bool) -> str:
+    """checkpoints.md's table: one row per checkpoint, one column per skill (min coverage with `fid`)."""
+    header = ["samples", "worst no-fall", "min diagonal", "min argmax acc.", *(["min coverage"] if fid else [])]
+    header += ["meets both", *skills]
+    align = "rrrr" + ("r" if fid else "") + "-" * (1 + len(skills))
+    return markdown_grid(header, [_report_row(r, skills, a, fid) for r in rows], align=align)
+
+
+def _report_row(r: dict, skills: list[str], a, fid: bool) -> list[str]:
+    """One checkpoint's table cells: its summary numbers, whether it meets both targets, per-skill cells."""
     cells = [
         f"{r['no_fall'][s]:.2f} / {r['diagonal'][s]:.2f}" + (f" / {r['fidelity']['coverage'][s]:.2f}" if fid else "")
         for s in skills
     ]
     ok = r["worst_no_fall"] >= a.min_no_fall and r["min_diagonal"] >= a.min_diagonal
-    return (
-        f"| {r['samples']:,} | {r['worst_no_fall']:.3f} | {r['min_diagonal']:.3f} | {r['min_class_acc']:.3f} | "
-        + (f"{r['min_coverage']:.3f} | " if fid else "")
-        + f"{'yes' if ok else 'no'} | "
-        + " | ".join(cells)
-        + " |"
-    )
+    summary = [
+        f"{r['samples']:,}",
+        f"{r['worst_no_fall']:.3f}",
+        f"{r['min_diagonal']:.3f}",
+        f"{r['min_class_acc']:.3f}",
+    ]
+    return [*summary, *([f"{r['min_coverage']:.3f}"] if fid else []), "yes" if ok else "no", *cells]
 
 
 def _chosen_lines(chosen: dict, confirm: dict, fid: bool) -> list[str]:

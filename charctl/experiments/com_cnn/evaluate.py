@@ -17,12 +17,12 @@ The metrics and the command are here; report.py writes report.md and the figures
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
 
 from charctl.errors import CharctlError
+from charctl.eval.report import write_json
 from charctl.experiments.com_cnn.body import BodyModel
 from charctl.experiments.com_cnn.checkpoint import LoadedRun, load_run, resolve_targets
 from charctl.experiments.com_cnn.data import WindowSet, heading_frame
@@ -191,7 +191,7 @@ def evaluate(targets: list[str], options: dict, overrides: list[str]) -> dict:
         plot_ar_curves(result["autoregressive"], float(cfg.data.fps), out_dir / "ar_curve.png")
     if options.get("dtw"):
         result["dtw"] = {p.name: dtw_errors(p, test_seqs, body, types) for p in preds}
-    (out_dir / "pose_error.json").write_text(json.dumps(result, indent=2))
+    write_json(out_dir / "pose_error.json", result)
     report = render_report(result)
     (out_dir / "report.md").write_text(report)
     print(report)

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from charctl.eval.report import markdown_row
+from charctl.eval.report import markdown_grid
 
 
 # ---------------------------------------------------------------------------- report
@@ -45,6 +45,7 @@ def render_report(res: dict) -> str:
     if "teacher_forced" in res:
         lines += _teacher_forced_section(res, types) + _autoregressive_section(res, types) + _speed_section(res)
     if "dtw" in res:
+        dtw = markdown_grid(["model", *types, "all"], [_dtw_cells(n, r, types) for n, r in res["dtw"].items()])
         lines += [
             "",
             "## DTW: whole held-out clips generated from their first frame and COM path",
@@ -53,23 +54,17 @@ def render_report(res: dict) -> str:
             "in cgail's eq. 6.1) after DTW alignment to the ground truth; "
             "frame by frame without alignment in brackets.",
             "",
-            markdown_row(["model", *types, "all"]),
-            markdown_row(["---"] * (len(types) + 2)),
+            *dtw.split("\n"),
         ]
-        for name, r in res["dtw"].items():
-            lines.append(
-                markdown_row(
-                    [
-                        name,
-                        *[
-                            f"{r['per_type'][t]:.3f} ({r['framewise_per_type'][t]:.3f})" if t in r["per_type"] else "–"
-                            for t in types
-                        ],
-                        f"{r['all']:.3f} ({r['framewise_all']:.3f})",
-                    ]
-                )
-            )
     return "\n".join(lines) + "\n"
+
+
+def _dtw_cells(name: str, r: dict, types: list[str]) -> list[str]:
+    """One model's DTW row: aligned (framewise) e_pose per motion type (– where it has none) and overall."""
+    per_type = [
+        f"{r['per_type'][t]:.3f} ({r['framewise_per_type'][t]:.3f})" if t in r["per_type"] else "–" for t in types
+    ]
+    return [name, *per_type, f"{r['all']:.3f} ({r['framewise_all']:.3f})"]
 
 
 def _teacher_forced_section(res: dict, types: list[str]) -> list[str]:
@@ -80,34 +75,28 @@ def _teacher_forced_section(res: dict, types: list[str]) -> list[str]:
         "between the predicted and the true local rotation, "
         "averaged over the movable joints and every frame of the held-out clips.",
         "",
-        markdown_row(["model", *types, "all", "frames"]),
-        markdown_row(["---"] * (len(types) + 3)),
     ]
-    for name, r in res["teacher_forced"].items():
-        lines.append(
-            markdown_row(
-                [
-                    name,
-                    *[f"{r['per_type'][t]:.2f}" if t in r["per_type"] else "–" for t in types],
-                    f"{r['all']:.2f}",
-                    r["frames"],
-                ]
-            )
-        )
+    rows = [_teacher_forced_cells(name, r, types) for name, r in res["teacher_forced"].items()]
     paper = res["paper_table5"]
-    lines.append(
-        markdown_row(["paper Table 5 (its own mocap; units not stated)", *[paper.get(t, "–") for t in types], "–", "–"])
-    )
-    lines += [
-        "",
-        "Per clip (teacher forcing, degrees):",
-        "",
-        markdown_row(["model", *res["test_clips"]]),
-        markdown_row(["---"] * (len(res["test_clips"]) + 1)),
+    rows.append(["paper Table 5 (its own mocap; units not stated)", *[paper.get(t, "–") for t in types], "–", "–"])
+    lines += markdown_grid(["model", *types, "all", "frames"], rows).split("\n")
+    clips = res["test_clips"]
+    per_clip = [
+        [name, *[f"{r['per_clip'].get(c, float('nan')):.2f}" for c in clips]]
+        for name, r in res["teacher_forced"].items()
     ]
-    for name, r in res["teacher_forced"].items():
-        lines.append(markdown_row([name, *[f"{r['per_clip'].get(c, float('nan')):.2f}" for c in res["test_clips"]]]))
+    lines += ["", "Per clip (teacher forcing, degrees):", "", *markdown_grid(["model", *clips], per_clip).split("\n")]
     return lines
+
+
+def _teacher_forced_cells(name: str, r: dict, types: list[str]) -> list:
+    """One model's teacher-forcing row: error (degrees) per motion type (– where it has none), overall, frames."""
+    return [
+        name,
+        *[f"{r['per_type'][t]:.2f}" if t in r["per_type"] else "–" for t in types],
+        f"{r['all']:.2f}",
+        r["frames"],
+    ]
 
 
 def _autoregressive_section(res: dict, types: list[str]) -> list[str]:
@@ -127,62 +116,20 @@ def _autoregressive_section(res: dict, types: list[str]) -> list[str]:
         "",
         "![autoregressive error](ar_curve.png)",
         "",
-        markdown_row(["model", "type", *[f"{h / fps:.2f} s" for h in marks], "root xz error at the end (m)"]),
-        markdown_row(["---"] * (len(marks) + 3)),
     ]
+    rows = []
     for name, r in ar.items():
         for key in ["all", *[t for t in types if t in r["curve_deg"]]]:
             c = r["curve_deg"][key]
-            lines.append(
-                markdown_row(
-                    [
-                        name,
-                        key,
-                        *[f"{c[h - 1]:.1f}" for h in marks],
-                        f"{r['root_xz_error_m'][-1]:.2f}" if key == "all" else "",
-                    ]
-                )
-            )
-    return lines
+            end = f"{r['root_xz_error_m'][-1]:.2f}" if key == "all" else ""
+            rows.append([name, key, *[f"{c[h - 1]:.1f}" for h in marks], end])
+    header = ["model", "type", *[f"{h / fps:.2f} s" for h in marks], "root xz error at the end (m)"]
+    return lines + markdown_grid(header, rows).split("\n")
 
 
 def _speed_section(res: dict) -> list[str]:
-    lines = [
-        "",
-        "## Training and generation",
-        "",
-        markdown_row(
-            [
-                "model",
-                "steps",
-                "samples",
-                "train wall (s)",
-                "samples/s",
-                "final loss (EMA)",
-                "gen frames/s (batch 1, CPU)",
-                "x real time",
-                "COM tracking (cm)",
-            ]
-        ),
-        markdown_row(["---"] * 9),
-    ]
-    for name, t in res["training"].items():
-        g = res["generation"][name]
-        lines.append(
-            markdown_row(
-                [
-                    name,
-                    t.get("step"),
-                    t.get("samples"),
-                    _fmt(t.get("wall_s"), 1),
-                    _fmt(t.get("samples_per_s"), 0),
-                    _fmt(t.get("train_loss_ema"), 4),
-                    f"{g['frames_per_s']:.0f}",
-                    f"{g['real_time_factor']:.1f}",
-                    f"{100 * g['com_tracking_error_m']:.1f}",
-                ]
-            )
-        )
+    rows = [_speed_cells(t, res["generation"][name], name) for name, t in res["training"].items()]
+    lines = ["", "## Training and generation", "", *markdown_grid(SPEED_HEADER, rows).split("\n")]
     lines += [
         "",
         "Generation demo (eval): seed = the first frames of "
@@ -203,6 +150,35 @@ def _speed_section(res: dict) -> list[str]:
             "",
         ]
     return lines
+
+
+SPEED_HEADER = [
+    "model",
+    "steps",
+    "samples",
+    "train wall (s)",
+    "samples/s",
+    "final loss (EMA)",
+    "gen frames/s (batch 1, CPU)",
+    "x real time",
+    "COM tracking (cm)",
+]
+
+
+def _speed_cells(t: dict, g: dict, name: str) -> list:
+    """One model's row of the training and generation table (SPEED_HEADER's columns): its training
+    numbers `t` and its generation demo's `g`."""
+    return [
+        name,
+        t.get("step"),
+        t.get("samples"),
+        _fmt(t.get("wall_s"), 1),
+        _fmt(t.get("samples_per_s"), 0),
+        _fmt(t.get("train_loss_ema"), 4),
+        f"{g['frames_per_s']:.0f}",
+        f"{g['real_time_factor']:.1f}",
+        f"{100 * g['com_tracking_error_m']:.1f}",
+    ]
 
 
 def _fmt(x, digits: int) -> str:

@@ -7,7 +7,33 @@ import json
 from pathlib import Path
 
 from charctl.errors import CharctlError
+from charctl.eval.report import markdown_grid
 from charctl.experiments.hopper_ga.results import load_best, open_hopper_run, run_dirs, write_outputs
+
+# the columns of report.md's gait table and limp table
+GAIT_HEADER = [
+    "speed (m/s)",
+    "beta",
+    "E_r",
+    "gamma",
+    "eval",
+    "stride (m)",
+    "flight time (s)",
+    "stance time (s)",
+    "cadence (steps/min)",
+    "GA",
+    "runtime, wall (s)",
+]
+
+LIMP_HEADER = [
+    "speed",
+    "beta",
+    "stance right / left, normal (s)",
+    "stance right / left, limp (s)",
+    "mean COM z normal (cm)",
+    "mean COM z limp (cm)",
+    "COM tracking RMS (cm)",
+]
 
 
 def _history(run) -> dict:
@@ -88,18 +114,25 @@ def _gait_table_md(rows: list[dict]) -> list[str]:
         "as listed); E_r is in units of",
         "`fitness.energy_scale`; one cycle = one step (stance + flight), stride = two steps, cadence in steps/min.",
         "",
-        "| speed (m/s) | beta | E_r | gamma | eval | stride (m) | flight time (s) | stance time (s) "
-        "| cadence (steps/min) | GA | runtime, wall (s) |",
-        "|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|---|",
     ]
-    for r in rows:
-        md.append(
-            f"| {r['speed']:g} | {r['beta']:g} | {r['E_r']:.3f} | {r['gamma']:.4f} | {r['eval']:.4f} | "
-            f"{r['stride_length_m']:.2f} | {r['flight_time_s']:.3f} | {r['stance_time_s']:.3f} | "
-            f"{r['cadence_spm']:.1f} | {r['population']} x {r['generations']} | "
-            f"{r['runtime']}, {r['wall_s']:.1f} |"
-        )
-    return md
+    return md + markdown_grid(GAIT_HEADER, [_gait_cells(r) for r in rows], align="r" * 9 + "--").split("\n")
+
+
+def _gait_cells(r: dict) -> list[str]:
+    """One run's row of the gait table (GAIT_HEADER's columns)."""
+    return [
+        f"{r['speed']:g}",
+        f"{r['beta']:g}",
+        f"{r['E_r']:.3f}",
+        f"{r['gamma']:.4f}",
+        f"{r['eval']:.4f}",
+        f"{r['stride_length_m']:.2f}",
+        f"{r['flight_time_s']:.3f}",
+        f"{r['stance_time_s']:.3f}",
+        f"{r['cadence_spm']:.1f}",
+        f"{r['population']} x {r['generations']}",
+        f"{r['runtime']}, {r['wall_s']:.1f}",
+    ]
 
 
 def _brisk_vs_normal_md(rows: list[dict]) -> list[str]:
@@ -126,30 +159,31 @@ def _limp_table_md(rows: list[dict]) -> list[str]:
         "",
         "## Limp test (Fig 3.13) and COM tracking (Fig 3.14)",
         "",
-        "| speed | beta | stance right / left, normal (s) | stance right / left, limp (s) | mean COM z normal (cm) "
-        "| mean COM z limp (cm) | COM tracking RMS (cm) |",
-        "|---:|---:|---|---|---:|---:|---:|",
+        *markdown_grid(LIMP_HEADER, [_limp_cells(r) for r in rows], align="rr--rrr").split("\n"),
     ]
-    for r in rows:
-        lp = r["limp"]
-        if "error" in lp:
-            md.append(
-                f"| {r['speed']:g} | {r['beta']:g} | limp run impossible: {lp['error']} | | | | "
-                f"{100 * lp['com_tracking_rms_m']:.2f} |"
-            )
-            continue
-        md.append(
-            f"| {r['speed']:g} | {r['beta']:g} | "
-            f"{lp['normal_stance_right_s']:.3f} / {lp['normal_stance_left_s']:.3f} | "
-            f"{lp['limp_stance_right_s']:.3f} / {lp['limp_stance_left_s']:.3f} | "
-            f"{100 * lp['normal_mean_com_z_m']:+.2f} | "
-            f"{100 * lp['limp_mean_com_z_m']:+.2f} | {100 * lp['com_tracking_rms_m']:.2f} |"
-        )
     md += [
         "",
         "Right is +z: with the left (limping) leg's stance shortened, the mean COM moves towards the sound right leg.",
     ]
     return md
+
+
+def _limp_cells(r: dict) -> list[str]:
+    """One run's row of the limp table (LIMP_HEADER's columns); a limp run that was impossible says why
+    in the first limp column and leaves the others empty."""
+    lp = r["limp"]
+    rms = f"{100 * lp['com_tracking_rms_m']:.2f}"
+    if "error" in lp:
+        return [f"{r['speed']:g}", f"{r['beta']:g}", f"limp run impossible: {lp['error']}", "", "", "", rms]
+    return [
+        f"{r['speed']:g}",
+        f"{r['beta']:g}",
+        f"{lp['normal_stance_right_s']:.3f} / {lp['normal_stance_left_s']:.3f}",
+        f"{lp['limp_stance_right_s']:.3f} / {lp['limp_stance_left_s']:.3f}",
+        f"{100 * lp['normal_mean_com_z_m']:+.2f}",
+        f"{100 * lp['limp_mean_com_z_m']:+.2f}",
+        rms,
+    ]
 
 
 def _figures_md(rows: list[dict], out: Path) -> list[str]:

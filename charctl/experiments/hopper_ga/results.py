@@ -80,9 +80,9 @@ def _tracking(m) -> dict:
 
 def write_outputs(out: Path, history: dict, genome: np.ndarray, s: Settings, cfg, figures: bool = True) -> dict:
     """best_genome.json, figures (fitness curve, COM path, limp, strip) and the numbers."""
+    from charctl.eval.report import write_json
     from charctl.experiments.hopper_ga import plots
     from charctl.experiments.hopper_ga.motion import run_motion
-    from charctl.files import atomic_write_text
 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -95,7 +95,7 @@ def write_outputs(out: Path, history: dict, genome: np.ndarray, s: Settings, cfg
         **gait,
         "genes": genome_dict(genome, s),
     }
-    atomic_write_text(out / "best_genome.json", json.dumps(doc, indent=2))
+    write_json(out / "best_genome.json", doc)
     normal, limping, limp_numbers = limp_test(genome, s, int(cfg.limp.cycles), float(cfg.limp.speed_factor))
     if figures:
         plots.fitness_curve(history, out / "fitness_curve.png", label)

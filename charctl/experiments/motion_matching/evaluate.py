@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from charctl.errors import CharctlError
+from charctl.eval.report import markdown_grid, write_json
 from charctl.experiments.motion_matching.cases import TABLE1, describe, with_case
 from charctl.experiments.motion_matching.config import NAME, load_config
 
@@ -27,7 +28,7 @@ def evaluate(targets: list[str], options: dict, overrides: list[str]) -> None:
     out = output_dir(cfg, options.get("out"))
     with TrainingProgress(len(cases), "Table 1 sweep", unit="cases") as bar:
         payload = run_sweep(cfg, out, progress=lambda case: bar.update(1, case=case), plan=(cases, paths))
-    (out / "metrics.json").write_text(json.dumps({k: v for k, v in payload.items() if k != "cases"}, indent=2))
+    write_json(out / "metrics.json", {k: v for k, v in payload.items() if k != "cases"})
     print((out / "sweep.md").read_text())
     print(
         f"sweep: {out / 'sweep.md'}, {out / 'sweep.json'}" + (f", plots in {out / 'plots'}" if cfg.sweep.plots else "")
@@ -107,7 +108,7 @@ def run_sweep(cfg, out_dir: Path, progress=None, plan: tuple[list[int], dict] | 
         "starts": starts,
     }
     payload = json.loads(json.dumps(payload))  # one form (string keys) for the file and the table
-    (out_dir / "sweep.json").write_text(json.dumps(payload, indent=2))
+    write_json(out_dir / "sweep.json", payload)
     (out_dir / "sweep.md").write_text(sweep_markdown(payload))
     if cfg.sweep.plots:
         plot_sweep(paths, rollouts, results, summary["best_case"], out_dir, starts)
@@ -160,23 +161,24 @@ def sweep_markdown(payload: dict) -> str:
     for metric in ("e_time", "e_near"):
         best_row = str(payload[f"best_case_{metric}"])
         best_col = {p: str(c) for p, c in payload[f"best_per_path_{metric}"].items()}
-        lines += [
-            f"**{titles[metric]}**",
-            "",
-            "| case | features | " + " | ".join(paths) + " | mean |",
-            "|---:|---|" + "---:|" * (len(paths) + 1),
-        ]
-        for c in cases:
-            cells = []
-            for p in paths:
-                r = results[c]["paths"][p]
-                cell = f"{r[f'{metric}_mean']:.3f} ± {r[f'{metric}_std']:.3f}"
-                cells.append(f"**{cell}**" if best_col[p] == str(c) else cell)
-            mark = " ★" if str(c) == best_row else ""
-            avg = payload[f"avg_{metric}"][c]
-            lines.append(f"| {c}{mark} | {results[c]['description']} | " + " | ".join(cells) + f" | {avg:.3f} |")
+        rows = [_sweep_row(payload, metric, c, best_row, best_col) for c in cases]
+        table = markdown_grid(["case", "features", *paths, "mean"], rows, align="r-" + "r" * (len(paths) + 1))
+        lines += [f"**{titles[metric]}**", "", *table.split("\n")]
         lines += ["", f"★ best row (lowest mean over the paths): case {best_row}; bold: best per path.", ""]
     return "\n".join(lines)
+
+
+def _sweep_row(payload: dict, metric: str, c: str, best_row: str, best_col: dict[str, str]) -> list[str]:
+    """Case `c`'s row of `sweep_markdown`'s `metric` table: the case (★ on the best row), its features,
+    mean ± std per path (bold: the path's best case), and the mean over the paths."""
+    results = payload["cases"]
+    cells = []
+    for p in payload["paths"]:
+        r = results[c]["paths"][p]
+        cell = f"{r[f'{metric}_mean']:.3f} ± {r[f'{metric}_std']:.3f}"
+        cells.append(f"**{cell}**" if best_col[p] == str(c) else cell)
+    mark = " ★" if str(c) == best_row else ""
+    return [f"{c}{mark}", results[c]["description"], *cells, f"{payload[f'avg_{metric}'][c]:.3f}"]
 
 
 def plot_sweep(paths: dict, rollouts: dict, results: dict, best: int, out_dir: Path, starts: int = 1) -> None:

@@ -3,13 +3,13 @@ one rollout along a target path, its errors and path plot in a new run directory
 
 from __future__ import annotations
 
-import json
 import time
 from pathlib import Path
 
 import numpy as np
 
 from charctl.errors import CharctlError
+from charctl.eval.report import write_json
 from charctl.experiments.motion_matching.cases import describe, resolve_case
 from charctl.experiments.motion_matching.config import NAME, load_config
 
@@ -49,7 +49,7 @@ def export(target: str, options: dict, overrides: list[str]) -> None:
         "generate_seconds": gen_s,
         "realtime_factor": rollout.num_frames / db.fps / max(gen_s, 1e-9),
     }
-    (out / "metrics.json").write_text(json.dumps(metrics, indent=2))
+    write_json(out / "metrics.json", metrics)
     _write_root_path(out / "root_path.csv", rollout, db.fps)
     _plot_path(out / "path.png", path, rollout, label, err)
     print(

@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from charctl.errors import CharctlError
+from charctl.eval.report import markdown_grid
 
 # ---------------------------------------------------------------------------- report.md
 PAPER_FRAMES, PAPER_HZ = 8171, 120
@@ -74,16 +75,11 @@ def findings(data: dict) -> list[str]:
 
 
 def bench_lines(bench: dict) -> list[str]:
-    lines = [
-        "| database | brute (wall / CPU µs) | kd-tree | bounding boxes | same answers |",
-        "|---|---:|---:|---:|:---:|",
-    ]
-    for label, row in bench["latency_us"].items():
-        cells = [
-            f"{row[k]['us_per_query']:.1f} / {row[k]['cpu_us_per_query']:.1f}" for k in ("brute", "kdtree", "bbox")
-        ]
-        same = all(v["same_as_brute"] for v in row.values())
-        lines.append(f"| {label} | " + " | ".join(cells) + f" | {'yes' if same else 'NO'} |")
+    """The benchmark's section of report.md: the query latency table (one row per database), the
+    machine it ran on and the runtime's speed."""
+    header = ["database", "brute (wall / CPU µs)", "kd-tree", "bounding boxes", "same answers"]
+    rows = [_latency_row(label, row) for label, row in bench["latency_us"].items()]
+    lines = markdown_grid(header, rows, align="-rrrc").split("\n")
     m = bench.get("machine", {})
     lines += [
         "",
@@ -97,6 +93,13 @@ def bench_lines(bench: dict) -> list[str]:
             "inertialization, root reconstruction)."
         )
     return lines
+
+
+def _latency_row(label: str, row: dict) -> list[str]:
+    """One database's latency cells (wall / CPU µs per query of each search) and whether all agree."""
+    cells = [f"{row[k]['us_per_query']:.1f} / {row[k]['cpu_us_per_query']:.1f}" for k in ("brute", "kdtree", "bbox")]
+    same = all(v["same_as_brute"] for v in row.values())
+    return [label, *cells, "yes" if same else "NO"]
 
 
 def source_text(folder: Path) -> str:
@@ -135,7 +138,7 @@ def clip_table(folder: Path) -> tuple[list[str], dict]:
 
     cfg = validate(OmegaConf.load(folder / "config.yaml"), Config, "motion-matching")
     sources, info = load_sources(cfg)
-    rows, stats = ["| clip | speed (m/s) | turn rate (deg/s) | turn radius (m) |", "|---|---:|---:|---:|"], {}
+    cells, stats = [], {}
     for s in sources:
         a, b = s.search_start, s.search_stop
         dist = np.linalg.norm(s.root_pos[b, [0, 2]] - s.root_pos[a, [0, 2]])
@@ -146,8 +149,9 @@ def clip_table(folder: Path) -> tuple[list[str], dict]:
         speed, rate = dist / secs, float(np.degrees(wrap_angle(h[1] - h[0]))) / secs
         radius = speed / np.radians(abs(rate)) if abs(rate) > 1.0 else float("inf")
         stats[s.name] = (speed, rate, radius)
-        rows.append(f"| {s.name} | {speed:.2f} | {rate:+.0f} | {radius:.1f} |")
-    return rows, stats
+        cells.append([s.name, f"{speed:.2f}", f"{rate:+.0f}", f"{radius:.1f}"])
+    header = ["clip", "speed (m/s)", "turn rate (deg/s)", "turn radius (m)"]
+    return markdown_grid(header, cells, align="-rrr").split("\n"), stats
 
 
 def limits(data: dict, folder: Path) -> list[str]:

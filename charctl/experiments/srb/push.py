@@ -14,13 +14,14 @@ two statements about the full-body baseline agree: it falls at 200 N (x 0.2 s = 
 
 from __future__ import annotations
 
-import json
 import math
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 import numpy as np
+
+from charctl.eval.report import markdown_grid, write_json
 
 WALK_CYCLE_S = 38 / 30.00120004800192  # one cycle of the shipped walk clip (38 frames at its 30 fps)
 
@@ -221,7 +222,7 @@ def comparison_markdown(
     if not present:
         return "no push results\n"
     ref = present[0]
-    head = "| push | impulse (N s) | " + " | ".join(labels) + " |\n|---|---|" + "---|" * len(labels) + "\n"
+    header = ["push", "impulse (N s)", *labels]
     lines = []
     for kind, title in (
         ("control", "no push (control: the same episodes unpushed)"),
@@ -231,11 +232,9 @@ def comparison_markdown(
         rows = [r for r in ref.cells() if r["kind"] == kind]
         if not rows:
             continue
-        lines.append(f"\n**{title}** — survival rate over directions x phases x trials\n\n" + head)
-        for r in rows:
-            cells = [f"{t.survival(kind, r['force_n'], r['duration_s']):.2f}" if t is not None else "—" for t in tables]
-            name = "no push" if kind == "control" else f"{r['force_n']:.0f} N for {r['duration_s']:g} s"
-            lines.append(f"| {name} | {r['impulse_ns']:g} | " + " | ".join(cells) + " |\n")
+        body = [_comparison_row(kind, r, tables) for r in rows]
+        lines.append(f"\n**{title}** — survival rate over directions x phases x trials\n\n")
+        lines.append(markdown_grid(header, body) + "\n")
     summary = ["\n**largest survived impulse-sweep force**\n"]
     for t, name in zip(tables, labels):
         if t is None:
@@ -247,6 +246,14 @@ def comparison_markdown(
             f"{_fmt_force(ls['largest_force_all_survived'])}; first fall at {_fmt_force(ls['first_force_with_fall'])}\n"
         )
     return "".join(lines) + "".join(summary)
+
+
+def _comparison_row(kind: str, r: dict, tables: Sequence[PushTable | None]) -> list[str]:
+    """One row of `comparison_markdown`: the cell `r` (of the first table) named, its impulse, then each
+    table's survival there (— where a table is missing)."""
+    cells = [f"{t.survival(kind, r['force_n'], r['duration_s']):.2f}" if t is not None else "—" for t in tables]
+    name = "no push" if kind == "control" else f"{r['force_n']:.0f} N for {r['duration_s']:g} s"
+    return [name, f"{r['impulse_ns']:g}", *cells]
 
 
 def _fmt_force(f) -> str:
@@ -284,12 +291,9 @@ def plot_comparison(tables: Sequence[PushTable | None], labels: Sequence[str], p
 
 
 def save_tables(tables: dict[str, PushTable | None], path: str | Path) -> Path:
-    from charctl.files import atomic_write_text
-
+    """Every table's `to_dict()` (null where missing) by name, as JSON at `path` (charctl.eval.report.write_json)."""
     path = Path(path)
-    atomic_write_text(
-        path, json.dumps({k: (v.to_dict() if v is not None else None) for k, v in tables.items()}, indent=1)
-    )
+    write_json(path, {k: (v.to_dict() if v is not None else None) for k, v in tables.items()})
     return path
 
 
