@@ -11,6 +11,7 @@ MuJoCo's arrays (`web_graph.py`); `--serve` then serves it on a local port.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -18,6 +19,8 @@ import torch
 from torch import nn
 
 from charctl.errors import CharctlError
+from charctl.experiments.cgail.drive import policy_steps
+from charctl.experiments.cgail.env import CgailEnv
 from charctl.experiments.cgail.policy import TrainedRun, load_trained_run, resolve_run_dirs
 
 WHAT_TO_EXPORT = "say what to export: --onnx FILE, --torchscript FILE, --bvh FILE, --video FILE or --web DIR"
@@ -104,16 +107,25 @@ def schedule_rollout(tr: TrainedRun, schedule: list[tuple[float, int]], seconds:
     hz = env.cfg.control_hz
     qpos = [env.sim.qpos[0].copy()]
     falls = 0
-    pending = list(schedule[1:])
-    for t in range(int(seconds * hz)):
+    for step in policy_steps(tr.agent, env, int(seconds * hz), before_step=_command_schedule(env, schedule[1:])):
+        falls += int(step.result.terminated[0])
+        qpos.append(env.sim.qpos[0].copy())
+    return np.array(qpos), {"falls": falls, "fps": hz}
+
+
+def _command_schedule(env: CgailEnv, pending: list[tuple[float, int]]) -> Callable[[int], None]:
+    """`before_step` of a one-character env following `pending` (start second, skill), sorted by time: before
+    control step t, each entry whose second is <= t / hz is commanded (ramped) in turn, then dropped."""
+    pending = list(pending)
+    hz = env.cfg.control_hz
+
+    def before_step(t: int) -> None:
         while pending and t / hz >= pending[0][0]:
             _, k = pending.pop(0)
             env.set_command(np.array([0]), k, ramp=True)
             env.forced_command = np.array([k])
-        res = env.step(tr.mean_action(env))
-        falls += int(res.terminated[0])
-        qpos.append(env.sim.qpos[0].copy())
-    return np.array(qpos), {"falls": falls, "fps": hz}
+
+    return before_step
 
 
 def export(target: str, options: dict, overrides: list[str]) -> None:
@@ -256,10 +268,11 @@ def play(run_dir) -> None:
             env.forced_command = np.array([k])
             print(f"command: {names[k]}")
 
+    steps = policy_steps(tr.agent, env)  # no end: one control step per frame while the viewer is open
     with mujoco.viewer.launch_passive(model, data, key_callback=on_key) as viewer:
         while viewer.is_running():
             t0 = time.perf_counter()
-            env.step(tr.mean_action(env))
+            next(steps)
             env.sim.batch.get_data(0, data)
             mujoco.mj_forward(model, data)
             viewer.sync()

@@ -37,6 +37,7 @@ from charctl.eval.fidelity import (
     signature,
     standing_sole_height,
 )
+from charctl.experiments.cgail.drive import policy_steps
 
 EPISODE_SECONDS = 5.0  # minimum episode length; longer clips get one clip length
 FILMSTRIP_FRAMES = 8
@@ -140,7 +141,6 @@ def record_rollouts(
     Each env is recorded from its reset until its time is up or it ends (a fall; the tracking
     baseline's non-looping clip ending), the frame that ends it not included."""
     agent = _agent(agent_or_run)
-    device = next(agent.model.parameters()).device
     hz = float(agent.cfg.env.control_hz)
     budget = np.repeat([int(round(s * hz)) for s in seconds], episodes)
     env = _make_env(agent, len(budget), seed, max(seconds) + 1.0)
@@ -151,11 +151,9 @@ def record_rollouts(
     lengths = np.ones(env.N, dtype=np.int64)
     alive = np.ones(env.N, dtype=bool)
     fell = np.zeros(env.N, dtype=bool)
-    for t in range(1, int(budget.max()) + 1):
-        obs = torch.as_tensor(env.state, dtype=torch.float32, device=device)
-        cond = torch.as_tensor(env.command_blend(), dtype=torch.float32, device=device) if agent.conditional else None
-        res = env.step(agent.model.mean_action(obs, cond).float().cpu().numpy().astype(np.float64))
-        active = alive & (t <= budget)
+    for step in policy_steps(agent, env, int(budget.max())):
+        res = step.result
+        active = alive & (step.t < budget)  # frame step.t + 1 is within the env's budget
         fell |= res.terminated & active
         alive = active & ~(res.terminated | res.truncated)
         lengths += alive

@@ -20,6 +20,7 @@ PIN_STEPS = 10
 def compute_pins(run_dir: str | Path) -> dict[str, np.ndarray]:
     """{"skills", "start_frames", "state0" (K*2, S), "action0" (K*2, 28), "state_after" (K*2, S)} of
     the policy in `run_dir` (a run or a pretrained folder)."""
+    from charctl.experiments.cgail.drive import policy_steps
     from charctl.experiments.cgail.policy import load_trained_run
 
     tr = load_trained_run(run_dir)
@@ -36,8 +37,8 @@ def compute_pins(run_dir: str | Path) -> dict[str, np.ndarray]:
     env.start_frame = None
     state0 = env.state.copy()
     action0 = tr.mean_action(env)
-    for _ in range(PIN_STEPS):
-        env.step(tr.mean_action(env))
+    for _ in policy_steps(tr.agent, env, PIN_STEPS):
+        pass
     return {
         "skills": np.array(tr.skill_names),
         "start_frames": frames,

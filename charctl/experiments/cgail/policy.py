@@ -10,6 +10,7 @@ import torch
 
 from charctl.errors import CharctlError
 from charctl.experiments.cgail.agent import Agent, build_agent, load_policy_state
+from charctl.experiments.cgail.drive import mean_action
 from charctl.experiments.cgail.env import CgailEnv
 from charctl.motion import rotations as R
 
@@ -52,11 +53,9 @@ class TrainedRun:
             tracking=self.cfg.reward.kind == "tracking",
         )
 
-    @torch.no_grad()
     def mean_action(self, env: CgailEnv) -> np.ndarray:
-        obs = torch.as_tensor(env.state, dtype=torch.float32)
-        cond = torch.as_tensor(env.command_blend(), dtype=torch.float32) if self.agent.conditional else None
-        return self.agent.model.mean_action(obs, cond).numpy().astype(np.float64)
+        """(N, 28) mean actions of the policy on the env's current state (`drive.mean_action`), float64."""
+        return mean_action(self.agent, env)
 
 
 def load_trained_run(run_dir: str | Path, checkpoint: str | None = None) -> TrainedRun:

@@ -15,16 +15,20 @@ the package's EXPERIMENT: the srb push study reaches it through the registry, ne
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
 
 from charctl.errors import CharctlError
+from charctl.experiments.cgail.drive import ForceSchedule, policy_steps
+from charctl.experiments.cgail.env import CgailEnv
 from charctl.experiments.cgail.policy import load_trained_run
 from charctl.motion import rotations as R
 
 
-def make_push_simulator(run_dir, skill: str = "walk"):
+def make_push_simulator(run_dir: str | Path, skill: str = "walk") -> Callable[[object, int], bool]:
+    """`simulate(case, seed) -> survived` of the run's `skill` policy (the module docstring's protocol)."""
     tr = load_trained_run(run_dir)
     if skill not in tr.skill_names:
         raise CharctlError(
@@ -38,33 +42,50 @@ def make_push_simulator(run_dir, skill: str = "walk"):
         env.start_frame = 0
         env.random_yaw = False
         env.reset(np.array([0]))
-        hz = env.cfg.control_hz
-        sub_dt = 1.0 / env.cfg.physics_hz
-        start = case.settle_s + case.phase * case.cycle_s
-        end = start + case.duration_s
-        total = end + case.observe_s
-        root = env.sim.body_ids[0]
-        force = np.zeros((1, env.sim.model.nbody, 6))
-        direction = None
-        for step in range(int(np.ceil(total * hz))):
-            t0 = step / hz
-            t1 = t0 + 1.0 / hz
-            f, n_sub = None, 0
-            if t1 > start and t0 < end:
-                if direction is None:  # fixed in the world at the push onset
-                    a = R.yaw_about_y(env.sim.body_quat_xyzw[0, 0]) + np.radians(case.direction_deg)
-                    direction = np.array([np.cos(a), 0.0, -np.sin(a)])
-                # physics substeps of this control step inside the window; the onset is quantised
-                # to the control step, the length to the physics substep (round(duration / dt))
-                n_sub = max(1, int(round((min(t1, end) - max(t0, start)) / sub_dt)))
-                force[0, root, :3] = case.force_n * direction
-                f = force
-            res = env.step(tr.mean_action(env), force=f, force_substeps=n_sub)
-            if res.terminated[0]:
+        _, end = push_window(case)
+        steps = int(np.ceil((end + case.observe_s) * env.cfg.control_hz))
+        for step in policy_steps(tr.agent, env, steps, force=push_schedule(env, case)):
+            if step.result.terminated[0]:
                 return False
         return True
 
     return simulate
+
+
+def push_window(case) -> tuple[float, float]:
+    """(start, end) s after the reset of the push of `case`: settle_s + phase * cycle_s, plus duration_s."""
+    start = case.settle_s + case.phase * case.cycle_s
+    return start, start + case.duration_s
+
+
+def push_schedule(env: CgailEnv, case) -> ForceSchedule:
+    """The `force` schedule of `case` for `drive.policy_steps` on a one-character env: (wrench (1, nbody, 6),
+    physics substeps) for control step t. A control step [t / hz, (t + 1) / hz) s that overlaps the push
+    window pushes the root (pelvis) with `force_n` newtons, horizontally along `direction_deg` of the heading
+    at the first such step (then fixed in the world); other steps get (None, 0)."""
+    hz = env.cfg.control_hz
+    sub_dt = 1.0 / env.cfg.physics_hz
+    start, end = push_window(case)
+    root = env.sim.body_ids[0]
+    force = np.zeros((1, env.sim.model.nbody, 6))
+    direction = None
+
+    def force_at(step: int) -> tuple[np.ndarray | None, int]:
+        nonlocal direction
+        t0 = step / hz
+        t1 = t0 + 1.0 / hz
+        if not (t1 > start and t0 < end):
+            return None, 0
+        if direction is None:  # fixed in the world at the push onset
+            a = R.yaw_about_y(env.sim.body_quat_xyzw[0, 0]) + np.radians(case.direction_deg)
+            direction = np.array([np.cos(a), 0.0, -np.sin(a)])
+        # physics substeps of this control step inside the window; the onset is quantised
+        # to the control step, the length to the physics substep (round(duration / dt))
+        n_sub = max(1, int(round((min(t1, end) - max(t0, start)) / sub_dt)))
+        force[0, root, :3] = case.force_n * direction
+        return force, n_sub
+
+    return force_at
 
 
 def find_baseline_run(output_root: Path) -> str:

@@ -9,6 +9,7 @@ in metrics.py, what is written in report.py.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -18,6 +19,8 @@ import torch.nn.functional as F
 
 from charctl.errors import CharctlError
 from charctl.experiments.cgail.discriminator import blended_class_reward, style_reward
+from charctl.experiments.cgail.drive import policy_steps
+from charctl.experiments.cgail.env import CgailEnv
 from charctl.experiments.cgail.policy import TrainedRun, load_trained_run, local_joint_rotations
 
 EVAL_OVERRIDES = ("output_root", "device")  # the only key=value overrides `charctl eval cgail` takes
@@ -36,17 +39,10 @@ class SkillRollout:
 @dataclass
 class DeviceRun(TrainedRun):
     """A trained run whose policy and discriminator live on torch `device` (loaded on the CPU with
-    `weights_only=True`, then moved). Inputs go to the device, results come back as numpy."""
+    `weights_only=True`, then moved). Inputs go to the device, results come back as numpy; the inherited
+    `mean_action` (drive.mean_action) runs the policy on the device its parameters sit on."""
 
     device: str = "cpu"
-
-    @torch.no_grad()
-    def mean_action(self, env) -> np.ndarray:
-        """(N, 28) mean actions (PD targets, the policy's action units) as float64 on the host."""
-        dev = self.device
-        obs = torch.as_tensor(env.state, dtype=torch.float32, device=dev)
-        cond = torch.as_tensor(env.command_blend(), dtype=torch.float32, device=dev) if self.agent.conditional else None
-        return self.agent.model.mean_action(obs, cond).cpu().numpy().astype(np.float64)
 
     @torch.no_grad()
     def discriminate(self, pairs: np.ndarray, cond: np.ndarray) -> tuple[torch.Tensor, torch.Tensor | None]:
@@ -106,11 +102,10 @@ def rollout_skill(tr: DeviceRun, skill: int, episodes: int, seconds: float, seed
     alive = np.ones(episodes, dtype=bool)
     rots = [[local_joint_rotations(env)[i]] for i in range(episodes)]
     pairs, falls = [], 0
-    for _ in range(steps):
-        o_t = env.obs.copy()
-        res = env.step(tr.mean_action(env))
+    for step in policy_steps(tr.agent, env, steps):
+        res = step.result
         rec = alive.copy()
-        pairs.append(np.concatenate([o_t, res.pair_next], axis=1)[rec])
+        pairs.append(np.concatenate([step.obs, res.pair_next], axis=1)[rec])
         fell = res.terminated & alive
         falls += int(fell.sum())
         alive &= ~res.terminated
@@ -136,11 +131,10 @@ def survival_rollout(tr: DeviceRun, skill: int, episodes: int, seconds: float, s
     env.reset(np.arange(episodes))
     alive = np.ones(episodes, dtype=bool)
     hits, total = torch.zeros((), dtype=torch.long, device=tr.device), 0  # hits stay on the device until the end
-    for _ in range(int(round(seconds * env.cfg.control_hz))):
-        o_t = env.obs.copy()
-        res = env.step(tr.mean_action(env))
+    for step in policy_steps(tr.agent, env, int(round(seconds * env.cfg.control_hz))):
+        res = step.result
         if tr.agent.conditional:
-            _, logits = tr.discriminate_for(np.concatenate([o_t, res.pair_next], axis=1)[alive], skill)
+            _, logits = tr.discriminate_for(np.concatenate([step.obs, res.pair_next], axis=1)[alive], skill)
             hits += (logits.argmax(-1) == skill).sum()
             total += int(alive.sum())
         alive &= ~res.terminated
@@ -164,6 +158,19 @@ class SwitchRecording:
     rot_after: np.ndarray  # (F, N, 15, 4)
 
 
+def _switch_at(env: CgailEnv, kb: int, t_switch: int, ramp: int) -> Callable[[int], tuple[np.ndarray, ...]]:
+    """`before_step` of the switch study: at control step `t_switch` every env is commanded `kb` (ramped
+    when `ramp` > 0); each step's command state (A, B, w, blend c̄), read before the step, is returned."""
+
+    def before_step(t: int) -> tuple[np.ndarray, ...]:
+        if t == t_switch:
+            env.set_command(np.arange(env.N), kb, ramp=ramp > 0)
+            env.forced_command = np.full(env.N, kb)
+        return env.prev_cmd.copy(), env.cmd.copy(), env.w.copy(), env.command_blend()
+
+    return before_step
+
+
 @torch.no_grad()
 def switch_rollout(
     tr: DeviceRun, ka: int, kb: int, trials: int, ramp: int, t_switch: int, t_end: int, perform_frames: int
@@ -179,15 +186,11 @@ def switch_rollout(
     env.reset(np.arange(trials))
     probs, rs, rc, alive_hist, pos_after, rot_after = [], [], [], [], [], []
     alive = np.ones(trials, dtype=bool)
-    for t in range(t_end):
+    for step in policy_steps(tr.agent, env, t_end, before_step=_switch_at(env, kb, t_switch, ramp)):
+        t, res, (cmd_a, cmd_b, w, blend) = step.t, step.result, step.before
         if t == t_switch:
-            env.set_command(np.arange(trials), kb, ramp=ramp > 0)
-            env.forced_command = np.full(trials, kb)
             alive_at_switch = alive.copy()
-        o_t = env.obs.copy()
-        cmd_a, cmd_b, w, blend = env.prev_cmd.copy(), env.cmd.copy(), env.w.copy(), env.command_blend()
-        res = env.step(tr.mean_action(env))
-        d, logits = tr.discriminate(np.concatenate([o_t, res.pair_next], axis=1), blend)
+        d, logits = tr.discriminate(np.concatenate([step.obs, res.pair_next], axis=1), blend)
         p = F.softmax(logits, -1)
         r_c = blended_class_reward(
             p,
