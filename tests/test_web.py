@@ -277,7 +277,9 @@ def test_onnx_graph_in_onnxruntime_web_equals_the_python_features(served, traine
 # ---------------------------------------------------------------------------- Node: the page's simulation module
 def _python_rollout(tr, schedule, seconds):
     """The reference: one env from the evaluation start (clip frame 0, yaw 0), the schedule's switches made
-    between steps with the page's goal rule (straight ahead); body positions after every control step."""
+    between steps with the page's goal rule (straight ahead); body positions after every control step, the
+    number of terminations, and the state's last two entries before each step up to the first termination
+    (the env resets a fallen character, the page does not)."""
     from charctl.motion import rotations as R
 
     names = tr.skill_names
@@ -296,21 +298,23 @@ def _python_rollout(tr, schedule, seconds):
     }
     hz = env.cfg.control_hz
     pending = [(t, names.index(n)) for t, n in schedule[1:]]
-    pos, falls = [env.sim.body_pos[0].copy()], 0
+    pos, falls, tails = [env.sim.body_pos[0].copy()], 0, []
     for t in range(int(round(seconds * hz))):
         while pending and t / hz >= pending[0][0]:
             _, k = pending.pop(0)
             env.set_command(np.array([0]), k, ramp=True)
             env.forced_command = np.array([k])
             env.goal_angle[0] = R.yaw_about_y(env.sim.body_quat_xyzw[0, 0])
+        if falls == 0:
+            tails.append(env.state[0, -2:].copy())
         falls += int(env.step(tr.mean_action(env)).terminated[0])
         pos.append(env.sim.body_pos[0].copy())
-    return start, np.array(pos), falls
+    return start, np.array(pos), falls, np.array(tails)
 
 
 def test_node_simulation_module_follows_the_python_rollout(served, trained, tmp_path):
     site, _, _ = served
-    start, want, py_falls = _python_rollout(trained, SCHEDULE, SECONDS)
+    start, want, py_falls, _ = _python_rollout(trained, SCHEDULE, SECONDS)
     (tmp_path / "ref.json").write_text(json.dumps(start))
     node(
         "node_rollout.mjs", "--site", str(site), "--ref", str(tmp_path / "ref.json"), "--out", str(tmp_path / "o.json")
@@ -372,3 +376,43 @@ def test_page_runs_in_headless_chromium(served, tmp_path):
         assert _character_pixels(shots / png) > 300, f"no character in {png}"
     assert (shots / "page_0s.png").read_bytes() != (shots / "page_5s.png").read_bytes()
     assert res.returncode == 0
+
+
+# ---------------------------------------------------------------------------- env.phase_obs in the page
+PHASE_SCHEDULE = [(0.0, "right_kick"), (0.3, "walk"), (0.5, "right_kick")]
+
+
+def test_a_phase_obs_run_plays_in_node_with_the_envs_phase(tmp_path):
+    """A tiny run trained with env.phase_obs (ramp of 4 frames): exported with --web, its graph takes the
+    `phase` input and web/sim.js keeps the reference frame as the env does. Over a kick -> walk -> kick schedule
+    the phase in every state Node feeds the graph equals the Python env's, step by step, up to the first
+    termination of the Python rollout (the env resets a fallen character, the page does not)."""
+    from charctl.experiments.cgail.policy import load_trained_run
+    from charctl.experiments.cgail.web_graph import graph_inputs
+
+    root = tmp_path / "runs"
+    res = run_charctl(
+        "train", "cgail", "scale=smoke", "use_skills=[walk,right_kick]", "env.phase_obs=true", "env.ramp_frames=4",
+        f"output_root={root}", timeout=600,
+    )  # fmt: skip
+    assert res.returncode == 0, res.stdout + res.stderr
+    (run,) = (root / "cgail").iterdir()
+    site = tmp_path / "site"
+    res = run_charctl("export", str(run), "--web", str(site))
+    assert res.returncode == 0, res.stdout + res.stderr
+    meta = json.loads((site / "meta.json").read_text())
+    assert meta["phase_obs"] is True and [s["loops"] for s in meta["skills"]] == [True, False]
+    import onnx
+
+    assert [i.name for i in onnx.load(str(site / "policy.onnx")).graph.input] == list(graph_inputs(True))
+    tr = load_trained_run(run)
+    assert tr.agent.model.obs_dim == 245
+    start, _, _, want = _python_rollout(tr, PHASE_SCHEDULE, 2.0)  # want: the phase before each step
+    ref, out = tmp_path / "ref.json", tmp_path / "o.json"
+    ref.write_text(json.dumps(start))
+    node("node_rollout.mjs", "--site", str(site), "--ref", str(ref), "--out", str(out))
+    got = np.array(json.loads(out.read_text())["phases"])[: len(want)]
+    print(f"phase compared over {len(want)} control steps; max |Node - Python| {np.abs(got - want).max():.1e}")
+    assert len(want) >= 20  # past the first switch (step 9) and the second (15), into the restarted kick
+    assert (want[:9, 0] != 0).all() and (want[10:14] == 0).all()  # kick: a phase; walk: none; ramp: none
+    np.testing.assert_allclose(got, want, atol=1e-12)

@@ -12,7 +12,7 @@
 export const GRAPH_INPUTS = [
   'xpos', 'xquat', 'cvel', 'subtree_com', 'geom_xpos', 'geom_xmat',
   'skill_from', 'skill_to', 'ramp_w', 'goal_skill', 'goal_yaw', 'prev_obs',
-];
+]; // plus 'phase' for a run trained with env.phase_obs (meta.phase_obs)
 
 // heading (yaw about +y) of a wxyz quaternion's forward (+x) axis: atan2(-f_z, f_x), as charctl's
 // rotations.yaw_about_y. Used only to aim pushes and goals, never as a policy input.
@@ -53,6 +53,12 @@ export class Character {
     this.K = meta.skills.length;
     this.rootBody = meta.root_body_id;
     this.bodyIds = meta.body_ids; // charctl body order -> MuJoCo body ids
+    // env.phase_obs: the policy state ends with (cos, sin) of the commanded clip's timed reference frame,
+    // kept here as charctl's env keeps it (CgailEnv._advance_phase, _restart_reference_after_ramp)
+    this.phaseObs = Boolean(meta.phase_obs);
+    this.clipFrames = meta.skills.map((s) => s.clip_frames ?? 1);
+    this.clipLoops = meta.skills.map((s) => Boolean(s.loops));
+    this.hasGoal = meta.skills.map((s) => Boolean(s.heading_goal));
     this.falls = 0;
     this.fallen = false;
     this.steps = 0;
@@ -66,7 +72,8 @@ export class Character {
 
   // Start pose of skill k (frame 0 of its clip, at the origin, heading +x) or the given qpos/qvel;
   // the command is k with no ramp and the heading goal straight ahead (or goalYaw).
-  reset(k, { qpos, qvel, goalYaw } = {}) {
+  // `frame`: the clip frame the state is taken from (the reference's start; 0 for the initial state).
+  reset(k, { qpos, qvel, goalYaw, frame = 0 } = {}) {
     const { mujoco, model, data } = this;
     const init = this.meta.initial[k];
     mujoco.mj_resetData(model, data);
@@ -85,6 +92,9 @@ export class Character {
     this.stateGoalSkill = k;
     this.stateGoalYaw = this.goalYaw;
     this.prevObs = null; // the first classifier pair is (o_0, o_0)
+    this.refFrame = frame;
+    this.refActive = true;
+    this.statePhase = this._phase(); // the phase the next state carries (latched, as the goal)
     this.pushes = [];
     this.fallen = false;
     this.fallTime = null;
@@ -101,6 +111,7 @@ export class Character {
     this.skillFrom = dominant;
     this.skillTo = k;
     this.w = ramp && this.rampFrames > 0 ? 0 : 1;
+    this.refActive = false; // the new clip's reference starts at frame 0 once the ramp has ended
     const q = this.data.xquat;
     const r = this.rootBody * 4;
     this.goalYaw = yawOfQuat(q[r], q[r + 1], q[r + 2], q[r + 3]); // new goal: straight ahead
@@ -133,7 +144,26 @@ export class Character {
       goal_skill: S(this.stateGoalSkill),
       goal_yaw: S(this.stateGoalYaw),
       prev_obs: new ort.Tensor('float64', this.prevObs || new Float64Array(this.meta.obs_dim), [1, this.meta.obs_dim]),
+      ...(this.phaseObs ? { phase: new ort.Tensor('float64', Float64Array.from(this.statePhase), [1, 2]) } : {}),
     };
+  }
+
+  // (cos, sin) of the reference frame's phase of the current command; (0, 0) for a skill with a heading
+  // goal and while the reference waits for a ramp (env._phase_features); null without env.phase_obs
+  _phase() {
+    if (!this.phaseObs) return null;
+    const k = this.skillTo;
+    if (this.hasGoal[k] || !this.refActive) return [0, 0];
+    const a = (2 * Math.PI * this.refFrame) / Math.max(this.clipFrames[k] - 1, 1);
+    return [Math.cos(a), Math.sin(a)];
+  }
+
+  // One frame on (env._advance_phase with restart): a looping clip wraps, a non-looping one starts again at 0
+  _advancePhase() {
+    const k = this.skillTo;
+    const last = Math.max(this.clipFrames[k] - 1, 1);
+    const next = this.refFrame + 1;
+    this.refFrame = this.clipLoops[k] ? next % last : next > last ? 0 : next;
   }
 
   // Evaluate the graph on the current state (no stepping); the first call after a reset uses o_0 as
@@ -194,9 +224,15 @@ export class Character {
     // effect: the next state carries the command and goal as they are now (web_graph.py, goal_skill)
     this.stateGoalSkill = this.skillTo;
     this.stateGoalYaw = this.goalYaw;
+    this._advancePhase();
+    this.statePhase = this._phase();
     this.prevObs = out.obs;
     if (this.rampFrames > 0) this.w = Math.min(1, this.w + 1 / this.rampFrames);
     else this.w = 1;
+    if (!this.refActive && this.w >= 1) {
+      this.refFrame = 0;
+      this.refActive = true;
+    }
     this.steps += 1;
     this.time = this.steps * this.controlDt;
     if (!isFiniteArray(data.qpos) || !isFiniteArray(data.qvel)) {

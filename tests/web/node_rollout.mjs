@@ -15,6 +15,7 @@ const pending = ref.schedule.slice(1);
 const steps = Math.round(ref.seconds * meta.control_hz);
 const positions = [sim.bodyPositions()];
 const states = [];
+const phases = []; // (cos, sin) at the end of the state each step started from (runs with meta.phase_obs)
 let inferMs = 0;
 let physicsMs = 0;
 const t1 = performance.now();
@@ -26,6 +27,7 @@ for (let t = 0; t < steps; t++) {
   inferMs += sim.lastInferenceMs;
   physicsMs += sim.lastPhysicsMs;
   if (t < 3) states.push(Array.from(out.state));
+  if (meta.phase_obs) phases.push(Array.from(out.state.slice(-2)));
   positions.push(sim.bodyPositions());
 }
 const wall = performance.now() - t1;
@@ -34,6 +36,7 @@ fs.writeFileSync(
   JSON.stringify({
     positions,
     states,
+    phases,
     falls: sim.falls,
     steps,
     load_ms: tLoad,

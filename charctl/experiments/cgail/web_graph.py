@@ -16,6 +16,9 @@ the model including the world body 0):
         steps takes effect, so for the step after a switch these are still the previous command's
         (the page keeps them latched one step; the blend uses the new A, B, w at once).
     prev_obs (B, 133): the `obs` output of the previous control step (the classifier's o_t)
+    phase (B, 2): only in the graph of a run trained with env.phase_obs: (cos, sin) of the commanded clip's
+        timed reference frame, (0, 0) for skills with a heading goal and while a ramp runs (env._phase_features;
+        the page keeps the reference frame, web/sim.js)
 Outputs:
     ctrl (B, nu): PD targets (radians; rest pose + action_scale * mean action), for `mjData.ctrl`
     state (B, 243): the policy state s_t; command (B, K): the blend c̄ = (1 - w) onehot(A) + w onehot(B)
@@ -105,11 +108,7 @@ class WebGraph(nn.Module):
                 f"{tr.run_dir} is a tracking run: its policy needs the reference clip's phase, which the web demo "
                 "does not play; export a cgail (adversarial) run"
             )
-        if getattr(tr.cfg.env, "phase_obs", False):
-            raise CharctlError(
-                f"{tr.run_dir} was trained with env.phase_obs=true: its policy needs the reference clip's phase, "
-                "which the web demo does not play yet; export a run trained without it"
-            )
+        self.phase_obs = bool(getattr(tr.cfg.env, "phase_obs", False))  # the `phase` input (module docstring)
         skel = load_skeleton()
         body_ids = np.array([model.body(n).id for n in skel.names])
         self.register_buffer("body_ids", torch.as_tensor(body_ids))
@@ -181,6 +180,7 @@ class WebGraph(nn.Module):
         goal_skill: torch.Tensor,
         goal_yaw: torch.Tensor,
         prev_obs: torch.Tensor,
+        phase: torch.Tensor | None = None,
     ) -> tuple[torch.Tensor, ...]:
         k = mujoco_kinematics(
             xpos, xquat, cvel, subtree_com, self.body_ids, self.masses, self.com_local, self.total_mass
@@ -194,7 +194,8 @@ class WebGraph(nn.Module):
         # heading goal (env._goal_features): the goal's direction relative to the heading, 0 without a goal
         rel = goal_yaw - RT.yaw_about_y(k.body_rot[:, 0])
         goal = torch.stack([torch.cos(rel), torch.sin(rel)], dim=1) * (onehot_goal @ self.has_goal)[:, None]
-        state = torch.cat([policy_state(k), goal], dim=1)
+        parts = [policy_state(k), goal] + ([phase] if self.phase_obs else [])
+        state = torch.cat(parts, dim=1)
         # the networks in float32, fed as the trainer feeds them (float64 features rounded to float32)
         action = self.policy(state.float(), command.float())
         ctrl = self.rest + self.action_scale * action.to(f64)
@@ -235,7 +236,12 @@ def _frozen_linear(m: nn.Module) -> nn.Linear:
     return out
 
 
-def example_inputs(model, K: int, batch: int = 1) -> tuple[torch.Tensor, ...]:
+def graph_inputs(phase_obs: bool) -> tuple[str, ...]:
+    """The graph's input names: INPUTS, and `phase` for a run trained with env.phase_obs."""
+    return (*INPUTS, "phase") if phase_obs else INPUTS
+
+
+def example_inputs(model, K: int, batch: int = 1, phase_obs: bool = False) -> tuple[torch.Tensor, ...]:
     """Inputs of the right shapes (the rest pose's arrays), for tracing the export."""
     import mujoco
 
@@ -246,6 +252,7 @@ def example_inputs(model, K: int, batch: int = 1) -> tuple[torch.Tensor, ...]:
         return torch.as_tensor(np.repeat(a[None], batch, axis=0), dtype=torch.float64)
 
     zeros = torch.zeros(batch, dtype=torch.float64)
+    phase = (torch.zeros(batch, 2, dtype=torch.float64),) if phase_obs else ()
     return (
         arr(data.xpos),
         arr(data.xquat),
@@ -259,6 +266,7 @@ def example_inputs(model, K: int, batch: int = 1) -> tuple[torch.Tensor, ...]:
         zeros,
         zeros,
         torch.zeros(batch, DISC_OBS_DIM, dtype=torch.float64),
+        *phase,
     )
 
 
@@ -279,8 +287,9 @@ def _atan2_float64(g, y, x):
 def export_web_onnx(tr, model, path) -> None:
     """Write the graph as ONNX (batch axis dynamic), inputs and outputs named as in the module docstring."""
     graph = WebGraph(tr, model).eval()
-    inputs = example_inputs(model, graph.K, batch=2)
-    dyn = {name: {0: "batch"} for name in (*INPUTS, *OUTPUTS)}
+    inputs = example_inputs(model, graph.K, batch=2, phase_obs=graph.phase_obs)
+    names = graph_inputs(graph.phase_obs)
+    dyn = {name: {0: "batch"} for name in (*names, *OUTPUTS)}
     opset = 17
     torch.onnx.register_custom_op_symbolic("aten::atan2", _atan2_float64, opset)
     try:
@@ -291,7 +300,7 @@ def export_web_onnx(tr, model, path) -> None:
                 graph,
                 inputs,
                 str(path),
-                input_names=list(INPUTS),
+                input_names=list(names),
                 output_names=list(OUTPUTS),
                 dynamic_axes=dyn,
                 opset_version=opset,

@@ -102,6 +102,8 @@ def site_meta(tr, model, checkpoint: str | None) -> dict:
                 "name": s.name,
                 "clip": s.clip_name,
                 "heading_goal": bool(s.heading_goal),
+                "clip_frames": len(s.obs),  # control frames of the clip: the phase's period (env.phase_obs)
+                "loops": bool(s.loop),
                 "key": keys[i] if i < 10 else "",
             }
             for i, s in enumerate(tr.agent.skills)
@@ -110,6 +112,7 @@ def site_meta(tr, model, checkpoint: str | None) -> dict:
         "control_hz": float(env.control_hz),
         "armature": float(env.armature),
         "ramp_frames": int(env.ramp_frames),
+        "phase_obs": bool(getattr(env, "phase_obs", False)),  # the policy state ends with the clip phase
         "action_scale": float(env.action_scale),
         "fall_tolerance": float(env.fall_tolerance),
         "obs_dim": DISC_OBS_DIM,
