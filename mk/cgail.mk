@@ -72,6 +72,14 @@ repro-cgail-fidelity-one-run: install ## cgail: the fidelity recipe from scratch
 	$(CHARCTL) eval $$G --checkpoints --after 10000000 -k 32 && \
 	$(CHARCTL) eval $$G --fidelity -k 4 && $(CHARCTL) eval $$G --survival 5 -k 32 && $(CHARCTL) eval $$G --dtw --confusion --switch walk right_kick -k 8
 
+# Run H (docs/cgail.md, "Run H"): run G's command plus the clip phase in the policy state (env.phase_obs=true).
+.PHONY: repro-cgail-fidelity-phase
+repro-cgail-fidelity-phase: install ## cgail: run G plus the clip phase in the policy state (3 skills, 4e7 samples; ~1.9 h on 2 cores), evaluated
+	$(CHARCTL) train cgail scale=small $(CGAIL_FID_FULL) env.phase_obs=true train.total_samples=$(CGAIL_FID_SAMPLES) output_root=$(CGAIL_FID)/H
+	H=$$(ls -d $(CGAIL_FID)/H/cgail/*/ | tail -1); \
+	$(CHARCTL) eval $$H --checkpoints --after 10000000 -k 32 && \
+	$(CHARCTL) eval $$H --fidelity -k 4 && $(CHARCTL) eval $$H --survival 5 -k 32 && $(CHARCTL) eval $$H --dtw --confusion --switch walk right_kick -k 8
+
 repro-cgail-10skill-fidelity: install ## cgail: the fidelity recipe on all ten skills (1.5e8 samples, the paper's budget; ~7 h on 2 cores, resumable with --resume), every kept checkpoint evaluated
 	$(CHARCTL) train cgail scale=small "use_skills=[]" $(CGAIL_FID_FULL) train.fidelity_every=2000000 train.total_samples=150000000 output_root=$(CGAIL_FID)/ten
 	T=$$(ls -d $(CGAIL_FID)/ten/cgail/*/ | tail -1); \
