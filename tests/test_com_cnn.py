@@ -271,7 +271,7 @@ def test_tiny_training_run_lowers_the_loss_and_resumes(tmp_path):
 
 # ---------------------------------------------------------------------------- the paper's safety clamp
 def test_com_clamp_never_moves_more_than_the_limit_and_keeps_the_direction():
-    from charctl.experiments.com_cnn.generate import clamp_com_path
+    from charctl.experiments.com_cnn.com_path import clamp_com_path
 
     rng = np.random.default_rng(3)
     path = np.cumsum(rng.normal(0, 0.05, size=(400, 3)), axis=0)
@@ -310,7 +310,7 @@ def test_split_never_puts_a_clip_and_its_mirror_on_both_sides(test_clips):
 
 # ---------------------------------------------------------------------------- COM paths
 def test_com_path_csv_problems_are_one_line_errors(tmp_path, capsys):
-    from charctl.experiments.com_cnn.generate import make_com_path
+    from charctl.experiments.com_cnn.com_path import make_com_path
 
     gen = compose().generate
     start = np.array([0.0, 0.9, 0.0])
@@ -346,7 +346,7 @@ def test_com_path_csv_problems_are_one_line_errors(tmp_path, capsys):
 
 
 def test_circle_path_has_the_asked_radius_speed_and_crouch():
-    from charctl.experiments.com_cnn.generate import make_com_path
+    from charctl.experiments.com_cnn.com_path import make_com_path
 
     gen = compose().generate
     start = np.array([0.2, 0.95, -0.1])
