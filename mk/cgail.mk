@@ -80,8 +80,8 @@ repro-cgail-fidelity-phase: install ## cgail: run G plus the clip phase in the p
 	$(CHARCTL) eval $$H --checkpoints --after 10000000 -k 32 && \
 	$(CHARCTL) eval $$H --fidelity -k 4 && $(CHARCTL) eval $$H --survival 5 -k 32 && $(CHARCTL) eval $$H --dtw --confusion --switch walk right_kick -k 8
 
-repro-cgail-10skill-fidelity: install ## cgail: the fidelity recipe on all ten skills (1.5e8 samples, the paper's budget; ~7 h on 2 cores, resumable with --resume), every kept checkpoint evaluated
-	$(CHARCTL) train cgail scale=small "use_skills=[]" $(CGAIL_FID_FULL) train.fidelity_every=2000000 train.total_samples=150000000 output_root=$(CGAIL_FID)/ten
+repro-cgail-10skill-fidelity: install ## cgail: run H's recipe (G's plus the clip phase) on all ten skills (1.5e8 samples, the paper's budget; ~6 h on 2 cores, resumable with --resume), every kept checkpoint evaluated
+	$(CHARCTL) train cgail scale=small "use_skills=[]" $(CGAIL_FID_FULL) env.phase_obs=true train.fidelity_every=2000000 train.total_samples=150000000 output_root=$(CGAIL_FID)/ten
 	T=$$(ls -d $(CGAIL_FID)/ten/cgail/*/ | tail -1); \
 	$(CHARCTL) eval $$T --checkpoints --after 50000000 -k 16 && $(CHARCTL) eval $$T --fidelity -k 4
 

@@ -3,7 +3,7 @@
 One site is exported through the real CLI with --serve (module fixture) and then checked:
 - the files, the MJCF (the run's own physics rate, armature, friction), the served MIME types;
 - the ONNX graph, run by onnxruntime-web in Node, against the Python features on recorded simulator
-  states: state (243), discriminator observation, command blend, classifier, PD targets, fall flag;
+  states: state (243, +2 with env.phase_obs), disc observation, command blend, classifier, PD targets, fall flag;
 - Node: the page's simulation module (web/sim.js) runs the policy 10 s from the start state of a
   Python rollout with the same command schedule: body positions agree over the first second, no falls;
 - headless Chromium (playwright-core, Debian's chromium): the page loads from the local server with no
@@ -122,7 +122,7 @@ def test_export_writes_a_static_site_with_the_runs_mjcf(served, trained):
     assert [s["name"] for s in meta["skills"]] == trained.skill_names == ["walk", "run", "right_kick"]
     assert [s["key"] for s in meta["skills"]] == ["1", "2", "3"]
     assert meta["physics_hz"] == env.physics_hz and meta["control_hz"] == env.control_hz
-    assert meta["ramp_frames"] == env.ramp_frames == 60 and meta["state_dim"] == 243
+    assert meta["ramp_frames"] == env.ramp_frames == 60 and meta["state_dim"] == 243 + 2 * env.phase_obs
     assert meta["packages"] == json.loads((WEB / "package.json").read_text())["dependencies"]
     for page in PAGE_FILES:  # the page's own files name nothing outside the site
         text = (site / page).read_text()
@@ -159,6 +159,7 @@ def _record_states(tr, n_envs: int = 12, steps: int = 75, every: int = 3, seed: 
     from charctl.motion import rotations as R
 
     env = tr.make_env(n_envs, seed=seed, switch_prob=0.0)
+    phase = bool(env.phase_obs)  # the graph's extra `phase` input (web_graph.graph_inputs)
     rng = np.random.default_rng(seed)
     N = env.N
     prev = env.obs.copy()
@@ -186,6 +187,7 @@ def _record_states(tr, n_envs: int = 12, steps: int = 75, every: int = 3, seed: 
                     latch[0].astype(float),
                     latch[1].copy(),
                     prev.copy(),
+                    *([env.state[:, -2:].copy()] if phase else []),  # the phase the state carries
                 ]
             )
             rows["state"].append(env.state.copy())
@@ -223,6 +225,7 @@ def _record_states(tr, n_envs: int = 12, steps: int = 75, every: int = 3, seed: 
             env.cmd.astype(float),
             env.goal_angle.copy(),
             obs.copy(),
+            *([state[:, -2:].copy()] if phase else []),
         ]
     )
     rows["state"].append(state)
@@ -247,20 +250,21 @@ def test_onnx_graph_in_onnxruntime_web_equals_the_python_features(served, traine
     import torch
     import torch.nn.functional as F
 
-    from charctl.experiments.cgail.web_graph import INPUTS
+    from charctl.experiments.cgail.web_graph import graph_inputs
 
     site, _, _ = served
     inputs, want = _record_states(trained)
     assert want["fell"].any() and not want["fell"].all(), "the recording should hold standing and fallen states"
     assert (want["command"].max(axis=1) < 1).any(), "the recording should hold ramps between commands"
-    feeds = {name: {"dims": list(a.shape), "data": a.ravel().tolist()} for name, a in zip(INPUTS, inputs)}
+    names = graph_inputs(trained.cfg.env.phase_obs)
+    feeds = {name: {"dims": list(a.shape), "data": a.ravel().tolist()} for name, a in zip(names, inputs, strict=True)}
     (tmp_path / "in.json").write_text(json.dumps(feeds))
     node(
         "graph_eval.mjs", "--site", str(site), "--inputs", str(tmp_path / "in.json"), "--out", str(tmp_path / "o.json")
     )
     out = {k: np.array(v["data"]).reshape(v["dims"]) for k, v in json.loads((tmp_path / "o.json").read_text()).items()}
     B = len(want["state"])
-    assert out["state"].shape == (B, 243)
+    assert out["state"].shape == (B, trained.agent.model.obs_dim)
     err = {k: float(np.abs(out[k] - want[k]).max()) for k in ("state", "obs", "command")}
     print(f"ONNX graph (onnxruntime-web, Node) vs Python features on {B} recorded states: {err}")
     assert err["state"] < 1e-5 and err["obs"] < 1e-5 and err["command"] < 1e-12, err
