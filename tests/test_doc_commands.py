@@ -236,7 +236,13 @@ def _run_kind(token: str, cmd: DocCommand, position: int) -> str:
 
 
 RUNNABLE = [c for c in COMMANDS if not skip_reason(c)]
-RESUME_TOTAL = {"cgail": 1024, "srb": 4096}  # resuming a finished smoke run needs a larger total
+# resuming a finished smoke run needs a larger budget, named by each experiment's own key (runner budget_key)
+RESUME_BUDGET = {
+    "cgail": "train.total_samples=1024",
+    "srb": "train.total_samples=4096",
+    "hopper-ga": "ga.generations=4",  # conf/preset/hopper-ga/smoke.yaml: 3
+    "com-cnn": "train.steps=90",  # conf/preset/com-cnn/smoke.yaml: 60
+}
 
 
 def smoke_argv(cmd: DocCommand, runs, cwd: Path) -> list[str]:
@@ -279,8 +285,9 @@ def smoke_argv(cmd: DocCommand, runs, cwd: Path) -> list[str]:
     command = out[0] if out else ""
     target = out[1] if len(out) > 1 else ""
     if command == "train" and resume:
-        if target in RESUME_TOTAL and not any(a.startswith("train.total_samples=") for a in out):
-            out.append(f"train.total_samples={RESUME_TOTAL[target]}")
+        budget = RESUME_BUDGET.get(target, "")
+        if budget and not any(a.startswith(budget.partition("=")[0] + "=") for a in out):
+            out.append(budget)
     elif command in ("train", "tune"):
         out += ["scale=smoke", f"output_root={runs.work / 'outputs'}"]
     elif command in ("eval", "export") and target == "motion-matching":
