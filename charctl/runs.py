@@ -106,6 +106,13 @@ class Run:
             stream_scalars(self.dir, self._max_step or 0, numbers, final=True)
         return path
 
+    def record_resume(self) -> None:
+        """A resumed run that will train: its overrides into config.yaml and resumes.txt (once). The runner calls
+        this after the checkpoint has loaded and the budget check has passed, so a refused resume writes nothing."""
+        if self.resumed and self.resume_overrides:
+            record_resume_overrides(self, self.resume_overrides)
+            self.resume_overrides = []
+
     # -------------------------------------------------------------- checkpoints
     def save_checkpoint(self, state: dict, signature: dict | None = None, name: str = "last.pt") -> Path:
         path = self.path("checkpoints", name)
@@ -113,9 +120,6 @@ class Run:
 
     def load_checkpoint(self, signature: dict | None = None, name: str = "last.pt") -> dict:
         payload = load_checkpoint(self.dir / "checkpoints" / name, self.experiment, signature, payload=True)
-        if self.resumed and self.resume_overrides:
-            record_resume_overrides(self, self.resume_overrides)
-            self.resume_overrides = []
         if self.resumed and "tb_step" in payload:
             # tb_step None: nothing was logged before this checkpoint, so every step in tb/ is stale
             # (a killed process logged past it): purge from step 0.

@@ -142,6 +142,12 @@ def test_stop_signal_checkpoints_the_finished_iteration_and_resume_continues(
     with pytest.raises(CharctlError) as exc:  # a resume of a finished run
         _train(tmp_path, FakeLearner(), resumed=True, **settings)
     assert str(exc.value) == f"{tmp_path} already reached {key}={total}; raise it to continue ({key}=...)"
+    # ...and a refused resume records nothing: its overrides reach resumes.txt only once training goes on
+    run = Run(dir=tmp_path, experiment="fake", cfg=None, resumed=True, resume_overrides=["a.b=1"])
+    with pytest.raises(CharctlError, match="already reached"):
+        run_on_policy(FakeLearner(), run, RunnerSettings(**settings))
+    run.close()
+    assert not (tmp_path / "resumes.txt").exists()
 
 
 @pytest.mark.parametrize("event, what", [("nan", "train/loss = nan"), ("inf-weight", "parameter Linear.weight")])

@@ -225,6 +225,8 @@ def run_on_policy(learner: Learner, run, settings: RunnerSettings) -> dict:
     if settings.done(learner) >= total:
         key = settings.budget_key
         raise CharctlError(f"{run.dir} already reached {key}={total}; raise it to continue ({key}=...)")
+    if run.resumed:
+        run.record_resume()
     samples_at_start, iterations_at_start, stats = learner.samples, learner.iteration, {}
     blowups = BlowupMonitor(settings.blowup_threshold, settings.blowup_window)
     bar_total, bar_done = settings.bar(learner)
