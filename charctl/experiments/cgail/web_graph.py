@@ -21,7 +21,7 @@ the model including the world body 0):
         the page keeps the reference frame, web/sim.js)
 Outputs:
     ctrl (B, nu): PD targets (radians; rest pose + action_scale * mean action), for `mjData.ctrl`
-    state (B, 243): the policy state s_t; command (B, K): the blend c̄ = (1 - w) onehot(A) + w onehot(B)
+    state (B, 243; 245 with phase): the policy state s_t; command (B, K): the blend c̄ = (1 - w) onehot(A) + w onehot(B)
     obs (B, 133): the discriminator observation o_t; probs (B, K): softmax of the class head on
         (prev_obs, obs) (zeros for an AMP run); style (B,): r_S = clip(1 - (1 - D)^2 / 4, 0, 1) (eq 4.7)
     fell (B,): 1 where a non-foot geom is within env.fall_tolerance of the ground (the env's fall rule)
