@@ -14,6 +14,7 @@ The commands are extracted from the fenced code blocks and inline code spans of 
 
 from __future__ import annotations
 
+import json
 import os
 import re
 import shlex
@@ -245,6 +246,15 @@ RESUME_BUDGET = {
 }
 
 
+def _pretrained_resume_copy(folder: Path, cwd: Path) -> list[str]:
+    """A resume of a committed run: a copy of its folder in the test's directory and a budget one
+    iteration past its samples (the committed config.yaml and checkpoints stay as they are)."""
+    copy = cwd / folder.name
+    shutil.copytree(folder, copy)
+    done = json.loads((folder / "metrics.json").read_text())["samples"]
+    return [str(copy), f"train.total_samples={done + 1}"]
+
+
 def smoke_argv(cmd: DocCommand, runs, cwd: Path) -> list[str]:
     """The command at smoke scale: placeholders -> smoke runs (a fresh copy for --resume), optional
     `[...]` parts dropped, `--seconds` / `-k` shrunk to 1, `--after` to 0 (a smoke run keeps its checkpoints from
@@ -275,6 +285,8 @@ def smoke_argv(cmd: DocCommand, runs, cwd: Path) -> list[str]:
             skip_next = True
         elif tok.startswith("train.total_samples="):
             out.append("train.total_samples=8192")
+        elif tok.startswith("pretrained/") and resume:  # never train into a committed folder: a copy, one step on
+            out += _pretrained_resume_copy(REPO / tok, cwd)
         elif tok.startswith("pretrained/"):  # a shipped policy: the repository's folder (the command runs elsewhere)
             out.append(str(REPO / tok))
         else:
@@ -340,6 +352,13 @@ def test_smoke_argv_substitutions(tmp_path):
     ]
     cmd = DocCommand("docs/srb.md", 1, "charctl train srb --resume outputs/srb/<run> train.total_samples=3000000")
     assert smoke_argv(cmd, runs, tmp_path) == ["train", "srb", "--resume", "/runs/srb_copy", "train.total_samples=8192"]
+    committed = REPO / "pretrained/in-progress/cgail-10skill-fidelity"
+    if committed.is_dir():  # a committed run is resumed from a copy, one iteration past its samples
+        samples = json.loads((committed / "metrics.json").read_text())["samples"]
+        cmd = DocCommand("x.md", 1, "charctl train cgail --resume pretrained/in-progress/cgail-10skill-fidelity")
+        argv = smoke_argv(cmd, runs, tmp_path)
+        assert argv == ["train", "cgail", "--resume", str(tmp_path / committed.name), f"train.total_samples={samples + 1}"]
+        assert (tmp_path / committed.name / "config.yaml").read_text() == (committed / "config.yaml").read_text()
     cmd = DocCommand("README.md", 1, "charctl train com-cnn -m data.history=45,90 model.kernel=2,5")
     assert smoke_argv(cmd, runs, tmp_path)[-2:] == ["scale=smoke", f"output_root={tmp_path / 'outputs'}"]
     line = 'charctl export RUN --commands "a:0,b:3"   # a # comment'
