@@ -7,9 +7,9 @@ as thread CPU time (10th percentile and median of 300 calls), so load from other
 sides less than wall time would:
 
 1. features: `features.sim_kinematics` + policy state + disc obs (numpy, today's CPU path) against the
-   same from `torch.from_numpy` views of MuJoCo's arrays (no copies), once with `features_torch` as the
-   warp env uses it (quaternion rotations) and once written like the numpy code (3x3 matrices, one shared
-   heading frame), the cheapest torch form found;
+   same from `torch.from_numpy` views of MuJoCo's arrays (no copies), once through the shared array-API
+   `features.py` as the warp env and web graph use it, and once as a hand-written torch port (3x3 matrices,
+   one shared heading frame, no array-API layer);
 2. a control step without physics (`sim.step` stubbed, 3 resets per step): `CgailEnv.step` against a
    torch port of its default path (`TorchStepPrototype` below: features, goal reward, episode ends, fall
    rates, ramp, with the numpy RNG and numpy resets kept, which favours the port).
@@ -27,7 +27,6 @@ import numpy as np
 import torch
 
 from charctl.experiments.cgail import features as F
-from charctl.experiments.cgail import features_torch as FT
 from charctl.experiments.cgail.env import CgailEnv
 from charctl.motion import rotations_torch as RT
 from charctl.motion.skeleton import END_EFFECTORS, load_skeleton
@@ -164,13 +163,17 @@ def main() -> None:
         f = F.heading_frame(k)
         return F.policy_state(k, f), F.disc_obs(k, f)
 
-    def quaternion_features():
+    def shared_features():
         pos, rot, lin, ang, com, com_vel, _ = torch_env.kinematics()
-        k = FT.Kinematics(pos, rot, lin, ang, com, com_vel)
-        return FT.policy_state(k), FT.disc_obs(k)
+        k = F.Kinematics(pos, rot, lin, ang, com, com_vel)
+        f = F.heading_frame(k)
+        return F.policy_state(k, f), F.disc_obs(k, f)
 
     s_np, o_np = numpy_features()
-    for name, (s, o) in {"quaternion": quaternion_features(), "matrix": torch_env.features(goal=False)[:2]}.items():
+    for name, (s, o) in {
+        "shared array-API": shared_features(),
+        "hand port": torch_env.features(goal=False)[:2],
+    }.items():
         err = max(float((s - torch.from_numpy(s_np)).abs().max()), float((o - torch.from_numpy(o_np)).abs().max()))
         print(f"torch {name} features - numpy: max |diff| {err:.1e}")
         assert err < 1e-12
@@ -181,8 +184,8 @@ def main() -> None:
     with torch.inference_mode():
         for r in range(a.rounds):
             print(
-                f"  round {r + 1}: features numpy {cpu_us(numpy_features)}, torch quaternion "
-                f"{cpu_us(quaternion_features)}, torch matrix {cpu_us(lambda: torch_env.features(goal=False))}; "
+                f"  round {r + 1}: features numpy {cpu_us(numpy_features)}, torch shared "
+                f"{cpu_us(shared_features)}, torch hand port {cpu_us(lambda: torch_env.features(goal=False))}; "
                 f"step w/o physics numpy {cpu_us(lambda: numpy_env.step(actions))}, "
                 f"torch {cpu_us(lambda: torch_env.torch_step(t_actions))}"
             )

@@ -70,7 +70,7 @@ CACHE = Path(os.environ.get("CHARCTL_NODE_CACHE", "/tmp/charctl-node"))  # downl
 NODE_DIR = REPO / ".node"  # git-ignored: what the device calls carry (parts/) and what the node writes
 PARTS = NODE_DIR / "parts"
 # What the GPU path (cgail with env.backend=warp, its tests, bench and eval) imports that the node lacks.
-ROOTS = ("mujoco-warp", "mujoco", "warp-lang", "hydra-core", "omegaconf", "dtw-python")
+ROOTS = ("mujoco-warp", "mujoco", "warp-lang", "hydra-core", "omegaconf", "dtw-python", "array-api-compat")
 # pip matches a manylinux tag exactly: every glibc level up to the node's target, oldest names last.
 PLATFORMS = tuple(f"manylinux_2_{n}_x86_64" for n in range(28, 16, -1)) + ("manylinux2014_x86_64", "manylinux1_x86_64")
 # The real bundle's archive as `build` made it (12 wheels + 21 clip files), for the plan's test.

@@ -248,13 +248,16 @@ def test_fall_rate_average_and_skill_probabilities_by_hand():
     0.5 of 1/2 -> 0.5; one with 4 episodes, all falls, keeps 0.25 of 0.2 -> 0.05 + 0.75 = 0.8; a skill with
     no ended episode keeps its rate. Probabilities: weight 0.5 over K=3 -> 1/6 each plus 0.5 * share of
     (rate + 0.001)."""
-    from charctl.experiments.cgail.env import skill_probabilities, update_fall_rates
+    from charctl.experiments.cgail.rules import skill_probabilities, update_fall_rates
 
     rates = np.array([0.5, 0.2, 0.3])
-    skill = np.array([0, 0, 1, 1, 1, 1])
-    fell = np.array([True, False, True, True, True, True])
-    new = update_fall_rates(rates, skill, fell, halflife=2.0)
+    skill = np.array([0, 0, 1, 1, 1, 1, 2])
+    fell = np.array([True, False, True, True, True, True, True])
+    ended = np.array([True, True, True, True, True, True, False])  # skill 2's env still runs: no episode
+    new = update_fall_rates(rates, skill, ended, fell, halflife=2.0)
     np.testing.assert_allclose(new, [0.5, 0.8, 0.3])
+    as_torch = update_fall_rates(*(torch.from_numpy(a) for a in (rates, skill, ended, fell)), halflife=2.0)
+    np.testing.assert_allclose(as_torch.numpy(), new, atol=1e-15)  # the one implementation, on torch tensors
     p = skill_probabilities(np.array([0.0, 0.3, 0.699]), 0.5)
     np.testing.assert_allclose(p, np.array([1, 1, 1]) / 6 + 0.5 * np.array([0.001, 0.301, 0.7]) / 1.002)
     assert p.sum() == pytest.approx(1.0)

@@ -91,7 +91,7 @@ def test_discriminator_separates_data_from_a_shifted_copy_and_not_from_itself():
 
 
 def test_tracking_reward_hand_values():
-    from charctl.experiments.cgail.env import tracking_reward
+    from charctl.experiments.cgail.rules import tracking_reward
 
     rng = np.random.default_rng(0)
     ref = rng.normal(size=(2, 133))
@@ -109,8 +109,9 @@ def test_tracking_env_phase_and_clip_end():
     from omegaconf import OmegaConf
 
     from charctl.experiments.cgail.config import EnvConfig, SkillConfig
-    from charctl.experiments.cgail.env import GOAL_DIM, PHASE_DIM, CgailEnv
+    from charctl.experiments.cgail.env import CgailEnv
     from charctl.experiments.cgail.features import STATE_DIM
+    from charctl.experiments.cgail.rules import GOAL_DIM, PHASE_DIM
     from charctl.experiments.cgail.skills import load_skills
 
     cfg = OmegaConf.structured(EnvConfig(num_envs=1, switch_prob=0.0, episode_seconds=100.0))

@@ -2,13 +2,18 @@
 the error by hand, the reference's timing (RSI, restart of a non-looping clip, start after a command
 switch's ramp), the closest-frame rule of locomotion clips, and the learner's counters."""
 
+import importlib.util
+
 import numpy as np
 import pytest
 from omegaconf import OmegaConf
 
 from charctl.experiments.cgail.config import EnvConfig, SkillConfig
-from charctl.experiments.cgail.env import CgailEnv, reference_pose_error
+from charctl.experiments.cgail.env import CgailEnv
+from charctl.experiments.cgail.rules import reference_pose_error
 from charctl.experiments.cgail.skills import load_skills
+
+needs_warp = pytest.mark.skipif(importlib.util.find_spec("mujoco_warp") is None, reason="needs MuJoCo Warp")
 
 
 @pytest.fixture(scope="module")
@@ -102,7 +107,9 @@ def test_episodes_that_leave_the_reference_end_without_counting_a_fall(skills):
     assert not loose.step(np.zeros((2, 28))).pose_ended.any()
 
 
-def test_learner_counts_pose_terminations_apart_from_falls():
+@pytest.mark.parametrize("backend", ["cpu", pytest.param("warp", marks=needs_warp)])
+def test_learner_counts_pose_terminations_apart_from_falls(backend):
+    """Both backends (the Warp env on the CPU here) end every step by the pose check at a 1 mm threshold."""
     from charctl.experiments.cgail.config import Config
     from charctl.experiments.cgail.train import CgailLearner
 
@@ -110,7 +117,8 @@ def test_learner_counts_pose_terminations_apart_from_falls():
         OmegaConf.structured(Config),
         {
             "use_skills": ["walk", "right_kick"],
-            "env": {"num_envs": 4, "episode_seconds": 5.0},
+            "device": "cpu",
+            "env": {"num_envs": 4, "episode_seconds": 5.0, "backend": backend},
             "ppo": {"hidden": [16], "minibatch_size": 32, "epochs": 1},
             "disc": {"hidden": [16], "batch_size": 32, "steps_per_iter": 1, "replay_size": 256},
             "reward": {"pose_error_threshold": 1e-3, "pose_error_grace_steps": 0},
@@ -128,8 +136,8 @@ def test_learner_counts_pose_terminations_apart_from_falls():
     [
         ({"reward": {"pose_error_threshold": -0.1}}, "must be >= 0"),
         ({"reward": {"pose_error_grace_steps": -1}}, "must be >= 0"),
-        ({"reward": {"pose_error_threshold": 0.5, "kind": "tracking"}}, "needs env.backend=cpu"),
-        ({"reward": {"pose_error_threshold": 0.5}, "env": {"backend": "warp"}}, "needs env.backend=cpu"),
+        ({"reward": {"pose_error_threshold": 0.5, "kind": "tracking"}}, "needs reward.kind=adversarial"),
+        ({"reward": {"low_style_threshold": 0.05, "kind": "tracking"}}, "needs reward.kind=adversarial"),
     ],
 )
 def test_config_errors(overrides, message):
@@ -141,7 +149,7 @@ def test_config_errors(overrides, message):
 
 def test_reference_reward_is_the_tracking_reward_where_the_reference_is_checked(skills):
     """reward.w_track: r_track against the pose-error reference, 0 for an env whose check is off (grace)."""
-    from charctl.experiments.cgail.env import tracking_reward
+    from charctl.experiments.cgail.rules import tracking_reward
 
     cfg = OmegaConf.structured(EnvConfig(num_envs=2, ramp_frames=4, switch_prob=0.0))
     env = CgailEnv(skills, cfg, seed=0, pose_error_threshold=10.0, pose_error_grace_steps=5, reference_reward=True)

@@ -234,8 +234,8 @@ def test_multi_skill_tracking_baseline_has_command_and_phase_in_its_inputs():
     from omegaconf import OmegaConf
 
     from charctl.experiments.cgail.config import Config
-    from charctl.experiments.cgail.env import PHASE_DIM
     from charctl.experiments.cgail.features import STATE_DIM
+    from charctl.experiments.cgail.rules import PHASE_DIM
     from charctl.experiments.cgail.train import CgailLearner
 
     cfg = OmegaConf.merge(

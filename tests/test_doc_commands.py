@@ -357,7 +357,13 @@ def test_smoke_argv_substitutions(tmp_path):
         samples = json.loads((committed / "metrics.json").read_text())["samples"]
         cmd = DocCommand("x.md", 1, "charctl train cgail --resume pretrained/in-progress/cgail-10skill-fidelity")
         argv = smoke_argv(cmd, runs, tmp_path)
-        assert argv == ["train", "cgail", "--resume", str(tmp_path / committed.name), f"train.total_samples={samples + 1}"]
+        assert argv == [
+            "train",
+            "cgail",
+            "--resume",
+            str(tmp_path / committed.name),
+            f"train.total_samples={samples + 1}",
+        ]
         assert (tmp_path / committed.name / "config.yaml").read_text() == (committed / "config.yaml").read_text()
     cmd = DocCommand("README.md", 1, "charctl train com-cnn -m data.history=45,90 model.kernel=2,5")
     assert smoke_argv(cmd, runs, tmp_path)[-2:] == ["scale=smoke", f"output_root={tmp_path / 'outputs'}"]

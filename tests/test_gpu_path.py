@@ -44,11 +44,10 @@ def _t(x: np.ndarray) -> torch.Tensor:
 
 def _clip_kinematics(name: str):
     from charctl.experiments.cgail import features as F
-    from charctl.experiments.cgail import features_torch as FT
     from charctl.motion.library import load_clip
 
     k = F.clip_kinematics(load_clip(name).resample(30.0))
-    kt = FT.Kinematics(*(_t(getattr(k, f)) for f in ("body_pos", "body_rot", "lin_vel", "ang_vel", "com", "com_vel")))
+    kt = F.Kinematics(*(_t(getattr(k, f)) for f in ("body_pos", "body_rot", "lin_vel", "ang_vel", "com", "com_vel")))
     return k, kt
 
 
@@ -78,27 +77,29 @@ def test_torch_rotations_equal_numpy():
 
 @pytest.mark.parametrize("clip_name", ["walk", "kick"])
 def test_torch_policy_state_and_disc_obs_equal_numpy(clip_name):
-    """Same kinematics in, same 241-d state and 133-d observation out: float64 to 1e-12, float32 to 2e-5."""
+    """The one implementation on torch tensors: same kinematics in, same 241-d state and 133-d observation
+    out as on numpy arrays: float64 to 1e-12, float32 to 2e-5."""
     from charctl.experiments.cgail import features as F
-    from charctl.experiments.cgail import features_torch as FT
+    from charctl.experiments.cgail import features as FT
 
     k, kt = _clip_kinematics(clip_name)
     s_np, o_np = F.policy_state(k), F.disc_obs(k)
     assert s_np.shape[1] == FT.STATE_DIM and o_np.shape[1] == FT.DISC_OBS_DIM
     np.testing.assert_allclose(FT.policy_state(kt).numpy(), s_np, atol=1e-12)
     np.testing.assert_allclose(FT.disc_obs(kt).numpy(), o_np, atol=1e-12)
-    k32 = FT.Kinematics(*(x.float() for x in vars(kt).values()))
+    k32 = FT.Kinematics(*(x.float() for x in vars(kt).values() if x is not None))
     np.testing.assert_allclose(FT.policy_state(k32).numpy(), s_np, atol=2e-5)
     np.testing.assert_allclose(FT.disc_obs(k32).numpy(), o_np, atol=2e-5)
 
 
 def test_torch_rewards_and_episode_ends_equal_numpy():
-    from charctl.experiments.cgail import features_torch as FT
-    from charctl.experiments.cgail.env import tracking_reward
+    from charctl.experiments.cgail import rules as FT
+    from charctl.experiments.cgail.features import disc_obs
+    from charctl.experiments.cgail.rules import tracking_reward
 
     rng = np.random.default_rng(1)
     _, kt = _clip_kinematics("run")
-    ref = FT.disc_obs(kt).numpy()
+    ref = disc_obs(kt).numpy()
     obs = ref + rng.normal(scale=0.05, size=ref.shape)
     np.testing.assert_allclose(FT.tracking_reward(_t(obs), _t(ref)).numpy(), tracking_reward(obs, ref), atol=1e-12)
     # heading-goal reward: CgailEnv._goal_reward's formula (d = (cos g, -sin g) in x-z)
@@ -110,10 +111,10 @@ def test_torch_rewards_and_episode_ends_equal_numpy():
     got = FT.goal_reward(_t(goal), _t(vel), _t(speed), _t(has_goal), sharp).numpy()
     np.testing.assert_allclose(got, want, atol=1e-12)
     # episode ends: every combination, against CgailEnv.step's numpy expressions
-    fell, unstable, ended = (rng.random(256) < 0.3 for _ in range(3))
+    fell, unstable, ended, pose = (rng.random(256) < 0.3 for _ in range(4))
     steps, max_steps = rng.integers(0, 12, 256), 10
-    term, trunc = FT.episode_end(_t(fell), _t(unstable), _t(steps), max_steps, _t(ended))
-    want_term = fell | unstable
+    term, trunc = FT.episode_end(_t(fell), _t(unstable), _t(pose), _t(steps), max_steps, _t(ended))
+    want_term = fell | unstable | pose
     np.testing.assert_array_equal(term.numpy(), want_term)
     np.testing.assert_array_equal(trunc.numpy(), ((steps >= max_steps) | ended) & ~want_term)
 
@@ -139,7 +140,7 @@ def test_torch_sim_kinematics_and_ground_contact_equal_numpy():
     """From the same simulator arrays (RSI states of three clips, some fallen), the torch COM velocity and
     lowest geom points equal the numpy ones."""
     from charctl.experiments.cgail import features as F
-    from charctl.experiments.cgail import features_torch as FT
+    from charctl.experiments.cgail import warp_kinematics as FT
     from charctl.motion.library import load_clip
     from charctl.sim.batch import BatchedHumanoid, _lowest_y
     from charctl.sim.humanoid import clip_to_qpos_qvel
@@ -276,9 +277,11 @@ def test_warp_blow_up_resets_only_the_affected_worlds(warp_sim_factory):
 
 
 @needs_warp
-def test_device_env_gives_the_cpu_env_observations(warp_sim_factory):
+@pytest.mark.parametrize("fidelity", [False, True], ids=["default", "phase-pose-track"])
+def test_device_env_gives_the_cpu_env_observations(warp_sim_factory, fidelity):
     """Same skill, same RSI frame, no random yaw, goal straight ahead: the warp env's state, obs and
-    rewards equal the C env's after reset and after one step with the same actions (float32 + parity)."""
+    rewards equal the C env's after reset and after one step with the same actions (float32 + parity);
+    with the fidelity recipe's env rules too (env.phase_obs, the pose-error check, r_track there)."""
     from omegaconf import OmegaConf
 
     from charctl.config import compose_config
@@ -287,16 +290,17 @@ def test_device_env_gives_the_cpu_env_observations(warp_sim_factory):
     from charctl.experiments.cgail.env_torch import CgailDeviceEnv
     from charctl.experiments.cgail.skills import load_skills, select_skills
 
-    cfg = compose_config(
-        "cgail", ["scale=smoke", "env.num_envs=4", "env.goal_max_angle_deg=0", "env.switch_prob=0"], Config
-    )
+    overrides = ["scale=smoke", "env.num_envs=4", "env.goal_max_angle_deg=0", "env.switch_prob=0"]
+    cfg = compose_config("cgail", overrides + (["env.phase_obs=true"] if fidelity else []), Config)
     skills = load_skills(select_skills(cfg), cfg.env.control_hz)
     env_cfg = OmegaConf.to_object(cfg.env)
     forced = np.array([0, 1, 0, 1])
+    # a 10 cm pose threshold without grace: the kick envs (error ~0.13 m) end on the first step, walk (~0.09) goes on
+    rules = dict(pose_error_threshold=0.10, pose_error_grace_steps=0, reference_reward=True) if fidelity else {}
     envs = []
     for make in (
-        lambda: CgailEnv(skills, env_cfg, seed=0),
-        lambda: CgailDeviceEnv(skills, env_cfg, seed=0, sim=warp_sim_factory(4)),
+        lambda: CgailEnv(skills, env_cfg, seed=0, **rules),
+        lambda: CgailDeviceEnv(skills, env_cfg, seed=0, sim=warp_sim_factory(4), **rules),
     ):
         env = make()
         env.forced_command = forced if isinstance(env, CgailEnv) else torch.as_tensor(forced)
@@ -313,13 +317,30 @@ def test_device_env_gives_the_cpu_env_observations(warp_sim_factory):
     np.testing.assert_allclose(_np(w_res.r_goal), c_res.r_goal, atol=1e-3)
     np.testing.assert_array_equal(_np(w_res.terminated), c_res.terminated)
     np.testing.assert_allclose(_np(w_env.command_blend()), c_env.command_blend(), atol=1e-7)
+    if fidelity:
+        assert c_env.state_dim == w_env.state_dim == 245  # the phase is in the state
+        np.testing.assert_array_equal(_np(w_res.pose_ended), c_res.pose_ended)
+        assert c_res.pose_ended.any() and not c_res.pose_ended.all(), c_res.pose_ended
+        np.testing.assert_allclose(_np(w_res.r_track), c_res.r_track, atol=2e-3)
+        assert (c_res.r_track > 0).any()
+
+
+FIDELITY_ENV_RULES = (
+    "env.phase_obs=true",
+    "reward.pose_error_threshold=0.5",
+    "reward.w_track=1.0",
+    "reward.low_style_threshold=0.05",
+    "env.skill_fall_weight=0.5",
+)
 
 
 @pytest.mark.slow
 @needs_warp
 def test_smoke_training_with_the_warp_backend_on_cpu(tmp_path):
-    """`charctl train cgail scale=smoke env.backend=warp device=cpu` completes; its checkpoint has the CPU
-    path's keys (plus the device env's generator state) and loads with the evaluation code."""
+    """`charctl train cgail scale=smoke env.backend=warp device=cpu` with the fidelity recipe's env rules
+    (the clip phase in the state, pose-error and low-style terminations, r_track, fall-weighted commands)
+    completes; its checkpoint has the CPU path's keys (plus the device env's generator state) and loads
+    with the evaluation code."""
     from charctl.checkpoints import load_checkpoint
     from charctl.experiments.cgail.policy import load_trained_run
 
@@ -328,6 +349,7 @@ def test_smoke_training_with_the_warp_backend_on_cpu(tmp_path):
         "cgail",
         "scale=smoke",
         "env.backend=warp",
+        *FIDELITY_ENV_RULES,
         f"device={WARP_DEVICE}",
         f"output_root={tmp_path}",
         timeout=1800,
@@ -339,4 +361,4 @@ def test_smoke_training_with_the_warp_backend_on_cpu(tmp_path):
     assert {"ppo", "disc", "disc_opt", "replay", "iteration", "samples", "torch_rng", "gen_rng"} <= set(state)
     assert "env_torch_rng" in state and state["replay"]["pairs"].device.type == "cpu"
     run = load_trained_run(run_dir)
-    assert run.agent.samples == 512
+    assert run.agent.samples == 512 and run.agent.model.obs_dim == 245  # 241 features + goal + phase

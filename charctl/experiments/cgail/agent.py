@@ -72,14 +72,14 @@ def build_agent(cfg, device: str = "cpu", training: bool = True) -> Agent:
     `training=False`: the policy, the discriminator and the skills only (no optimiser, demonstration
     pairs or replay buffer), for loading a checkpoint with `load_policy_state`; the networks are built
     from the same seed in the same order, so the global torch generator ends in the same state."""
-    from charctl.experiments.cgail.env import GOAL_DIM, PHASE_DIM
-    from charctl.experiments.cgail.features import DISC_OBS_DIM, STATE_DIM
+    from charctl.experiments.cgail.features import DISC_OBS_DIM
+    from charctl.experiments.cgail.rules import state_dim as policy_state_width
 
     torch.manual_seed(cfg.seed)
     skills = load_skills(select_skills(cfg), cfg.env.control_hz, cfg.disc.demo_oversample)
     K = len(skills)
     conditional = bool(cfg.cgail.conditional)
-    state_dim = STATE_DIM + GOAL_DIM + (PHASE_DIM if cfg.reward.kind == "tracking" or cfg.env.phase_obs else 0)
+    state_dim = policy_state_width(cfg.reward.kind == "tracking" or cfg.env.phase_obs)
     model = ActorCritic(state_dim, 28, cfg.ppo, cond_dim=K if conditional else 0).to(device)
     if not training:
         disc = _discriminator(cfg, 2 * DISC_OBS_DIM, K).to(device)  # its normaliser comes from the checkpoint

@@ -84,7 +84,7 @@ class EnvConfig:
     # with reward.pose_error_threshold the episode ends when the character leaves the clip's timed reference, and a
     # policy that sees only its pose and the command cannot tell when a kick that restarts from the guard is due.
     # (0, 0) for skills with a heading goal (their reference is the closest frame) and during a command ramp.
-    # false = the paper's state (command only). CPU env only. docs/cgail.md, "Run H".
+    # false = the paper's state (command only). docs/cgail.md, "Run H".
     phase_obs: bool = False
     # cpu (C MuJoCo, numpy) | warp (MuJoCo Warp on `device`, README "GPU") | auto (warp on CUDA)
     backend: Annotated[str, Literal["cpu", "warp", "auto"]] = "cpu"
@@ -101,7 +101,7 @@ class RewardConfig:
     kind: Annotated[str, Literal["adversarial", "tracking"]] = "adversarial"
     # Early termination on a low style reward (ProtoMotions AMP, against the stand-still optimum): an episode ends
     # when r_S of its pairs, scored for its command, stayed below this for low_style_steps control steps in a row.
-    # 0 = off (the paper). CPU env only. charctl.experiments.cgail.termination; docs/cgail.md, "Fidelity recipe".
+    # 0 = off (the paper). charctl.experiments.cgail.termination; docs/cgail.md, "Fidelity recipe".
     low_style_threshold: float = 0.0
     low_style_steps: int = 10  # consecutive control steps below low_style_threshold that end an episode
     # Early termination on a large pose error against the commanded clip's timed reference (DeepMimic-style
@@ -109,7 +109,7 @@ class RewardConfig:
     # (a non-looping clip restarts at frame 0 when it ends); after a command switch it starts at frame 0 once the
     # ramp has finished. An episode ends (no bootstrap, not a fall) when a hand, a foot (relative to the root,
     # heading frame) or the root height is farther than this (m) from the reference, outside the grace steps
-    # that follow each restart. 0 = off (the paper). CPU env only. docs/cgail.md, "Fidelity recipe".
+    # that follow each restart. 0 = off (the paper). docs/cgail.md, "Fidelity recipe".
     pose_error_threshold: float = 0.0
     pose_error_grace_steps: int = 10  # control steps after a reference restart with no check (time to reach frame 0)
     # Weight w_T of a DeepMimic tracking reward (env.tracking_reward, in [0, 1]) against the pose-error check's
@@ -225,12 +225,12 @@ def _check_rewards(cfg) -> str | None:
     r = cfg.reward
     if not 0.0 <= r.low_style_threshold < 1.0 or r.low_style_steps < 1:
         return "reward.low_style_threshold must lie in [0, 1) and reward.low_style_steps be >= 1"
-    if r.low_style_threshold > 0 and (cfg.env.backend != "cpu" or r.kind != "adversarial"):
-        return "reward.low_style_threshold > 0 needs env.backend=cpu and reward.kind=adversarial"
+    if r.low_style_threshold > 0 and r.kind != "adversarial":
+        return "reward.low_style_threshold > 0 needs reward.kind=adversarial"
     if r.pose_error_threshold < 0 or r.pose_error_grace_steps < 0:
         return "reward.pose_error_threshold and reward.pose_error_grace_steps must be >= 0"
-    if r.pose_error_threshold > 0 and (cfg.env.backend != "cpu" or r.kind != "adversarial"):
-        return "reward.pose_error_threshold > 0 needs env.backend=cpu and reward.kind=adversarial"
+    if r.pose_error_threshold > 0 and r.kind != "adversarial":
+        return "reward.pose_error_threshold > 0 needs reward.kind=adversarial"
     if r.w_track < 0 or (r.w_track > 0 and r.pose_error_threshold <= 0):
         return "reward.w_track must be >= 0, and > 0 only with reward.pose_error_threshold > 0 (its reference)"
     n_skills = len(cfg.use_skills) if cfg.use_skills else len(cfg.skills)
@@ -270,8 +270,6 @@ def _check_env(cfg) -> str | None:
         return f"env.skill_fall_weight must lie in [0, 1], got {env.skill_fall_weight}"
     if env.skill_fall_halflife <= 0:
         return f"env.skill_fall_halflife must be > 0 episodes, got {env.skill_fall_halflife}"
-    if env.skill_fall_weight > 0 and env.backend != "cpu":
-        return "env.skill_fall_weight > 0 is implemented for env.backend=cpu only"
     return None
 
 
@@ -283,8 +281,6 @@ def _check_train(cfg) -> str | None:
         return "train.keep_checkpoint_every must be >= 0 samples (0 = keep only last.pt)"
     if cfg.env.ramp_frames < 0:
         return "env.ramp_frames must be >= 0"
-    if cfg.env.backend == "warp" and cfg.env.phase_obs:
-        return "env.phase_obs needs the CPU env (env.backend=cpu)"
     if cfg.env.backend == "warp":
         import importlib.util
 

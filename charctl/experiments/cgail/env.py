@@ -17,53 +17,28 @@ import numpy as np
 from charctl.config import plain_section
 from charctl.experiments.cgail.features import (
     DISC_OBS_DIM,
-    STATE_DIM,
     disc_obs,
     heading_frame,
     policy_state,
     sim_kinematics,
 )
+from charctl.experiments.cgail.rules import (
+    advance_reference,
+    episode_end,
+    goal_features,
+    goal_reward,
+    phase_features,
+    pose_key_error,
+    pose_keys,
+    reference_pose_error,
+    skill_probabilities,
+    state_dim,
+    tracking_reward,
+    update_fall_rates,
+)
 from charctl.experiments.cgail.skills import SkillData
 from charctl.motion import rotations as R
 from charctl.sim.batch import BatchedHumanoid, SimSettings
-
-GOAL_DIM = 2
-PHASE_DIM = 2  # (cos, sin) of the clip phase, in the state of the tracking baseline only
-
-# DeepMimic-style tracking reward (reward.kind=tracking), computed on the discriminator
-# observation o (heading frame, so it is invariant to the character's yaw): weights and scales
-# of the pose, velocity, end-effector and root ("COM") terms. See docs/cgail.md, "Tracking baseline".
-TRACK_WEIGHTS = {"pose": 0.65, "vel": 0.1, "ee": 0.15, "root": 0.1}
-TRACK_SCALES = {"pose": 1.0, "vel": 0.1, "ee": 40.0, "root_height": 10.0, "root_vel": 1.0}
-_OBS_ROOT_H, _OBS_ROOT_V, _OBS_ROT, _OBS_VEL, _OBS_EE = (
-    slice(0, 1),
-    slice(1, 4),
-    slice(7, 79),
-    slice(79, 121),
-    slice(121, 133),
-)
-
-
-def tracking_reward(obs: np.ndarray, ref: np.ndarray) -> np.ndarray:
-    """(N,) r in [0, 1] between simulated and reference disc observations (N, 133).
-
-    r = 0.65 exp(-1 sum_j |rot6_j - rot6*_j|^2) + 0.1 exp(-0.1 sum_b |v_b - v*_b|^2)
-      + 0.15 exp(-40 sum_e |p_e - p*_e|^2) + 0.1 exp(-10 (h - h*)^2 - |v_root - v*_root|^2)
-    (joint rotations as the first two rotation-matrix columns; velocities in m/s; positions in m,
-    relative to the root in the heading frame).
-    """
-
-    def sq(sl: slice) -> np.ndarray:
-        return np.sum((obs[:, sl] - ref[:, sl]) ** 2, axis=1)
-
-    w, k = TRACK_WEIGHTS, TRACK_SCALES
-    root = np.exp(-k["root_height"] * sq(_OBS_ROOT_H) - k["root_vel"] * sq(_OBS_ROOT_V))
-    return (
-        w["pose"] * np.exp(-k["pose"] * sq(_OBS_ROT))
-        + w["vel"] * np.exp(-k["vel"] * sq(_OBS_VEL))
-        + w["ee"] * np.exp(-k["ee"] * sq(_OBS_EE))
-        + w["root"] * root
-    )
 
 
 @dataclass
@@ -78,36 +53,6 @@ class StepResult:
     truncated: np.ndarray  # (N,) bool: time limit
     unstable: np.ndarray  # (N,) bool: simulator blow-up this step
     pose_ended: np.ndarray | None = None  # (N,) bool: ended by a large pose error (part of `terminated`, not a fall)
-
-
-def reference_pose_error(obs: np.ndarray, ref: np.ndarray) -> np.ndarray:
-    """(N,) m: the largest distance between simulated and reference disc observations (N, 133) over the
-    four end effectors (hands and feet, relative to the root in the heading frame) and the root height."""
-    ee = np.linalg.norm((obs[:, _OBS_EE] - ref[:, _OBS_EE]).reshape(len(obs), -1, 3), axis=2).max(axis=1)
-    return np.maximum(ee, np.abs(obs[:, 0] - ref[:, 0]))
-
-
-def update_fall_rates(
-    rates: np.ndarray, ended_skill: np.ndarray, ended_fell: np.ndarray, halflife: float
-) -> np.ndarray:
-    """Per-skill exponential moving average of the fall indicator over ended episodes.
-
-    `rates` (K,) in [0, 1]; `ended_skill` (n,) the command of each episode that just ended, `ended_fell`
-    (n,) whether it ended by a fall. A skill with m ended episodes and f falls moves to
-    a^m rates + (1 - a^m) f/m with a = 0.5^(1/halflife): its memory halves every `halflife` episodes."""
-    K = len(rates)
-    m = np.bincount(ended_skill, minlength=K).astype(np.float64)
-    f = np.bincount(ended_skill, weights=ended_fell.astype(np.float64), minlength=K)
-    keep = 0.5 ** (m / halflife)
-    return keep * rates + (1.0 - keep) * (f / np.maximum(m, 1.0))
-
-
-def skill_probabilities(rates: np.ndarray, fall_weight: float, floor: float = 1e-3) -> np.ndarray:
-    """(K,) command probabilities: (1 - fall_weight) uniform + fall_weight in proportion to
-    `rates` + `floor` (the floor keeps a share for skills that never fall)."""
-    K = len(rates)
-    w = rates + floor
-    return (1.0 - fall_weight) / K + fall_weight * w / w.sum()
 
 
 class CgailEnv:
@@ -156,7 +101,7 @@ class CgailEnv:
         self.ref_grace = np.zeros(self.N, dtype=np.int64)  # pose-error check: steps left without a check
         self.clip_frames = np.array([len(sk.obs) for sk in skills])
         self.clip_loops = np.array([sk.loop for sk in skills])
-        self.state_dim = STATE_DIM + GOAL_DIM + (PHASE_DIM if tracking or self.phase_obs else 0)
+        self.state_dim = state_dim(tracking or self.phase_obs)
         self.obs_dim = self.state_dim
         self.episode_return_goal = np.zeros(self.N)
         self.fall_count = 0
@@ -244,20 +189,14 @@ class CgailEnv:
     # ------------------------------------------------------------------ observation
     def _goal_features(self, k, rows: np.ndarray | slice = slice(None)) -> np.ndarray:
         """(n, 2) cos/sin of the goal direction relative to the heading of envs `rows` (0 without a goal)."""
-        heading = R.yaw_about_y(k.body_rot[:, 0])
-        rel = self.goal_angle[rows] - heading
-        g = np.stack([np.cos(rel), np.sin(rel)], axis=1)
-        return g * self.has_goal[self.cmd[rows]][:, None]
+        return goal_features(self.goal_angle[rows], R.yaw_about_y(k.body_rot[:, 0]), self.has_goal[self.cmd[rows]])
 
     def _phase_features(self, rows: np.ndarray | slice = slice(None)) -> np.ndarray:
         """(n, 2) cos/sin of the reference clip phase of envs `rows` (tracking baseline, env.phase_obs). With
         env.phase_obs it is (0, 0) for skills with a heading goal and while the reference waits for a ramp."""
-        frame, cmd = self.ref_frame[rows], self.cmd[rows]
-        phase = 2.0 * np.pi * frame / np.maximum(self.clip_frames[cmd] - 1, 1)
-        out = np.stack([np.cos(phase), np.sin(phase)], axis=1)
-        if self.phase_obs:
-            out *= (~self.has_goal[cmd] & self.ref_active[rows])[:, None]
-        return out
+        cmd = self.cmd[rows]
+        shown = (~self.has_goal[cmd] & self.ref_active[rows]) if self.phase_obs else None
+        return phase_features(self.ref_frame[rows], self.clip_frames[cmd], shown)
 
     def _features(self, k, rows: np.ndarray | slice = slice(None)) -> tuple[np.ndarray, np.ndarray]:
         """(policy state, disc obs) of envs `rows` whose kinematics are `k`, sharing one heading frame."""
@@ -271,16 +210,13 @@ class CgailEnv:
         """Step every env's reference frame (a looping clip wraps); returns (reference obs (N, 133) at the new
         frame, (N,) clip ended). A non-looping clip ends at its last frame (the tracking baseline truncates
         there) or, with `restart` (the pose-error reference), starts again at frame 0 with grace steps."""
-        loops = self.clip_loops[self.cmd]
-        last = np.maximum(self.clip_frames[self.cmd] - 1, 1)
-        nxt = self.ref_frame + 1
+        cmd = self.cmd
+        self.ref_frame, ended, again = advance_reference(
+            self.ref_frame, self.clip_loops[cmd], self.clip_frames[cmd], restart
+        )
         if restart:
-            again = ~loops & (nxt > last)
-            self.ref_frame = np.where(again, 0, np.where(loops, nxt % last, nxt))
             self.ref_grace = np.where(again, self.pose_grace, np.maximum(self.ref_grace - 1, 0))
-            return self._reference_obs(), np.zeros(self.N, dtype=bool)
-        self.ref_frame = np.where(loops, nxt % last, np.minimum(nxt, last))
-        return self._reference_obs(), ~loops & (nxt >= last)
+        return self._reference_obs(), ended
 
     def _reference_obs(self, frames: np.ndarray | None = None) -> np.ndarray:
         """(N, 133) the commanded clip's disc observation at every env's reference frame (or at `frames`)."""
@@ -301,8 +237,7 @@ class CgailEnv:
         for s in np.unique(self.cmd[self.has_goal[self.cmd]]):
             m = np.flatnonzero(self.cmd == s)
             clip = self.skills[s].obs
-            each = reference_pose_error(np.repeat(obs[m], len(clip), axis=0), np.tile(clip, (len(m), 1)))
-            each = each.reshape(len(m), len(clip))
+            each = pose_key_error(pose_keys(obs[m])[:, None], pose_keys(clip)[None])  # (n, T) m
             best = each.argmin(axis=1)
             err[m], ref[m] = each[np.arange(len(m)), best], clip[best]
         return err, ref
@@ -349,15 +284,15 @@ class CgailEnv:
             pose_ended = checked & (err > self.pose_threshold)
             if self.reference_reward:  # reward.w_track: the tracking reward where the reference is checked
                 r_track = np.where(checked, tracking_reward(pair_next, scored), 0.0)
-        terminated = fell | unstable | pose_ended
         self.steps += 1
-        truncated = ((self.steps >= self.max_steps) | clip_ended) & ~terminated
+        terminated, truncated = episode_end(fell, unstable, pose_ended, self.steps, self.max_steps, clip_ended)
         self.fall_count += int(fell.sum())
         done = np.flatnonzero(terminated | truncated)
         if done.size:
             # a pose-error termination counts as a failure of the skill, like a fall (env.skill_fall_weight)
-            failed = (fell | pose_ended)[done]
-            self.fall_rate = update_fall_rates(self.fall_rate, self.cmd[done], failed, self.cfg.skill_fall_halflife)
+            self.fall_rate = update_fall_rates(
+                self.fall_rate, self.cmd, terminated | truncated, fell | pose_ended, self.cfg.skill_fall_halflife
+            )
         state, obs = final_state.copy(), pair_next.copy()
         self._state, self._obs = state, obs
         self._advance_ramp()
@@ -373,12 +308,9 @@ class CgailEnv:
         )
 
     def _goal_reward(self, k) -> np.ndarray:
-        """r_G in [0, 1]: exp(-sharpness (v* - d . v_xz)^2) for locomotion skills, else 1."""
-        d = np.stack([np.cos(self.goal_angle), -np.sin(self.goal_angle)], axis=1)  # yaw -> (x, z) direction
-        v = k.com_vel[:, [0, 2]]
-        along = np.sum(d * v, axis=1)
-        r = np.exp(-self.cfg.goal_sharpness * (self.speed[self.cmd] - along) ** 2)
-        return np.where(self.has_goal[self.cmd], r, 1.0)
+        """r_G in [0, 1] (`rules.goal_reward`): 1 for skills without a heading goal."""
+        cmd = self.cmd
+        return goal_reward(self.goal_angle, k.com_vel, self.speed[cmd], self.has_goal[cmd], self.cfg.goal_sharpness)
 
     def _maybe_switch(self, ids: np.ndarray) -> None:
         if self.K < 2 or self.cfg.switch_prob <= 0 or ids.size == 0 or self.forced_command is not None:

@@ -3,7 +3,9 @@
 Same episode logic as `env.CgailEnv` (docs/cgail.md): the commanded skill B, the previous one A and
 the ramp weight w (eq 4.10), heading goals for locomotion skills, reference-state initialisation
 (RSI) from a random frame of the commanded clip turned by a random yaw and moved to the origin,
-the tracking baseline's reference phase, episode ends on a fall / a blow-up / the time limit.
+the tracking baseline's reference phase, the timed reference of the pose-error check, `reward.w_track`
+and env.phase_obs, fall-weighted commands, episode ends on a fall / a blow-up / a large pose error /
+the time limit. The rules themselves are `features.py` and `rules.py`, shared with the CPU env.
 Every per-env quantity is a tensor on the simulation device and every branch that depends on
 data is a mask (`torch.where`), so a control step issues no host round trip: resets run for a
 (possibly all-false) mask each step, with RSI candidates drawn for every env and written only
@@ -23,19 +25,29 @@ import torch
 import torch.nn.functional as F
 
 from charctl.config import plain_section
-from charctl.experiments.cgail.env import GOAL_DIM, PHASE_DIM
-from charctl.experiments.cgail.features_torch import (
+from charctl.experiments.cgail.features import (
     DISC_OBS_DIM,
-    STATE_DIM,
     Kinematics,
     disc_obs,
-    episode_end,
-    goal_reward,
+    heading_frame,
     policy_state,
-    sim_kinematics,
+)
+from charctl.experiments.cgail.rules import (
+    advance_reference,
+    episode_end,
+    goal_features,
+    goal_reward,
+    phase_features,
+    pose_key_error,
+    pose_keys,
+    reference_pose_error,
+    skill_probabilities,
+    state_dim,
     tracking_reward,
+    update_fall_rates,
 )
 from charctl.experiments.cgail.skills import SkillData
+from charctl.experiments.cgail.warp_kinematics import sim_kinematics
 from charctl.motion import rotations_torch as RT
 from charctl.sim.batch import SimSettings
 
@@ -53,6 +65,7 @@ class DeviceStepResult:
     terminated: torch.Tensor  # (N,) bool: fall or blow-up
     truncated: torch.Tensor  # (N,) bool: time limit or end of a non-looping reference clip
     unstable: torch.Tensor  # (N,) bool: simulator blow-up this step
+    pose_ended: torch.Tensor | None = None  # (N,) bool: ended by a large pose error (part of `terminated`)
 
 
 def _pad(arrays: list[np.ndarray], device: torch.device, dtype=torch.float32) -> torch.Tensor:
@@ -75,6 +88,9 @@ class CgailDeviceEnv:
         seed: int = 0,
         conditional: bool = True,
         tracking: bool = False,
+        pose_error_threshold: float = 0.0,
+        pose_error_grace_steps: int = 10,
+        reference_reward: bool = False,
         device: str | torch.device = "cpu",
         sim=None,
     ):
@@ -82,7 +98,12 @@ class CgailDeviceEnv:
 
         self.skills = skills
         self.cfg = env_cfg = plain_section(env_cfg)  # typed fields, cheap reads in the step loop
-        self.tracking = tracking
+        self.tracking = tracking  # phase in the state, reference frame advanced every step
+        # as CgailEnv: the pose-error check against the clip's timed reference, r_track there, env.phase_obs
+        self.pose_threshold, self.pose_grace = float(pose_error_threshold), int(pose_error_grace_steps)
+        self.reference_reward = bool(reference_reward)
+        self.phase_obs = bool(getattr(env_cfg, "phase_obs", False)) and not tracking
+        self.timed_reference = self.pose_threshold > 0 or self.phase_obs  # reference advanced, restarting at frame 0
         self.conditional = conditional
         self.K = len(skills)
         self.N = int(env_cfg.num_envs)
@@ -101,6 +122,7 @@ class CgailDeviceEnv:
         self.rsi_qpos = _pad([s.qpos for s in skills], dev)  # (K, T, nq)
         self.rsi_qvel = _pad([s.qvel for s in skills], dev)  # (K, T, nv)
         self.ref_obs = _pad([s.obs for s in skills], dev)  # (K, T, 133)
+        self.ref_keys = pose_keys(self.ref_obs)  # (K, T, 13): what the pose error compares
         self.clip_frames = torch.as_tensor([len(s.obs) for s in skills], **i64)
         self.rsi_frames = torch.as_tensor([len(s.qpos) for s in skills], **i64)
         self.clip_loops = torch.as_tensor([s.loop for s in skills], dtype=torch.bool, device=dev)
@@ -113,11 +135,14 @@ class CgailDeviceEnv:
         self.w = torch.ones(self.N, **f32)  # ramp weight
         self.steps = torch.zeros(self.N, **i64)
         self.goal_angle = torch.zeros(self.N, **f32)  # world yaw of the heading goal (radians about +y)
-        self.ref_frame = torch.zeros(self.N, **i64)
+        self.ref_frame = torch.zeros(self.N, **i64)  # reference clip frame at the current phase
+        self.ref_active = torch.ones(self.N, dtype=torch.bool, device=dev)  # reference valid (off during a switch)
+        self.ref_grace = torch.zeros(self.N, **i64)  # pose-error check: steps left without a check
+        self.fall_rate = torch.full((self.K,), 0.5, dtype=torch.float64, device=dev)  # env.skill_fall_weight
         self.forced_command: torch.Tensor | None = None  # evaluation: fixed command per env (-1 = random)
         self.start_frame: int | None = None
         self.random_yaw = True
-        self.state_dim = STATE_DIM + GOAL_DIM + (PHASE_DIM if tracking else 0)
+        self.state_dim = state_dim(tracking or self.phase_obs)
         self.obs_dim = self.state_dim
         self._falls = torch.zeros((), **i64)
         self._state = torch.zeros(self.N, self.state_dim, **f32)
@@ -149,6 +174,7 @@ class CgailDeviceEnv:
         self.cmd = torch.where(mask, new, self.cmd)
         start = 0.0 if (ramp and self.cfg.ramp_frames > 0) else 1.0
         self.w = torch.where(changed, torch.full_like(self.w, start), self.w)
+        self.ref_active = self.ref_active & ~changed  # the new clip's reference starts once the ramp has ended
         self._new_goal(changed, self.sim.body_quat_xyzw[:, 0])
 
     def _advance_ramp(self) -> None:
@@ -167,7 +193,7 @@ class CgailDeviceEnv:
         """RSI of the envs in `mask` ((N,) bool or integer ids) from a random frame of a random skill
         (or the forced one); candidates are drawn for every env, written where the mask is set."""
         mask = self.sim.as_mask(mask)
-        skill = self._randint(self.K)
+        skill = self._sample_skills()
         if self.forced_command is not None:
             forced = self.forced_command.to(self.device)
             skill = torch.where(forced >= 0, forced, skill)
@@ -190,37 +216,55 @@ class CgailDeviceEnv:
         self.w = torch.where(mask, torch.ones_like(self.w), self.w)
         self.steps = torch.where(mask, torch.zeros_like(self.steps), self.steps)
         self.ref_frame = torch.where(mask, frames, self.ref_frame)
+        self.ref_active = self.ref_active | mask
+        self.ref_grace = torch.where(mask, torch.zeros_like(self.ref_grace), self.ref_grace)
         k = sim_kinematics(self.sim)
         self._new_goal(mask, k.body_rot[:, 0])
         m = mask[:, None]
-        self._state = torch.where(m, self._policy_state(k), self._state)
-        self._obs = torch.where(m, disc_obs(k), self._obs)
+        state, obs = self._features(k)
+        self._state = torch.where(m, state, self._state)
+        self._obs = torch.where(m, obs, self._obs)
 
     # ------------------------------------------------------------------ observation
-    def _goal_features(self, k: Kinematics) -> torch.Tensor:
-        rel = self.goal_angle - RT.yaw_about_y(k.body_rot[:, 0])
-        g = torch.stack([torch.cos(rel), torch.sin(rel)], dim=1)
-        return g * self.has_goal[self.cmd][:, None]
+    def _features(self, k: Kinematics) -> tuple[torch.Tensor, torch.Tensor]:
+        """(policy state (N, state_dim), disc obs (N, 133)): the shared features (`features.py`, `rules.py`)
+        with one heading frame, the heading goal and, for the tracking baseline, the clip phase."""
+        f = heading_frame(k)
+        heading = RT.yaw_about_y(k.body_rot[:, 0])
+        parts = [policy_state(k, f), goal_features(self.goal_angle, heading, self.has_goal[self.cmd])]
+        if self.tracking or self.phase_obs:  # env.phase_obs: (0, 0) with a heading goal or while a ramp runs
+            shown = (~self.has_goal[self.cmd] & self.ref_active) if self.phase_obs else None
+            parts.append(phase_features(self.ref_frame, self.clip_frames[self.cmd], shown).float())
+        return torch.cat(parts, dim=1), disc_obs(k, f)
 
-    def _phase_features(self) -> torch.Tensor:
-        """(N, 2) cos/sin of the reference clip phase (tracking baseline)."""
-        phase = 2.0 * math.pi * self.ref_frame / torch.clamp(self.clip_frames[self.cmd] - 1, min=1)
-        return torch.stack([torch.cos(phase), torch.sin(phase)], dim=1).float()
+    def _advance_phase(self, restart: bool = False) -> tuple[torch.Tensor, torch.Tensor]:
+        """Step every env's reference frame (`rules.advance_reference`); returns (reference obs (N, 133) at the
+        new frame, (N,) clip ended). With `restart` a non-looping clip starts again at 0 with grace steps."""
+        cmd = self.cmd
+        self.ref_frame, ended, again = advance_reference(
+            self.ref_frame, self.clip_loops[cmd], self.clip_frames[cmd], restart
+        )
+        if restart:
+            grace = torch.clamp(self.ref_grace - 1, min=0)
+            self.ref_grace = torch.where(again, torch.full_like(grace, self.pose_grace), grace)
+        return self.ref_obs[cmd, self.ref_frame], ended
 
-    def _policy_state(self, k: Kinematics) -> torch.Tensor:
-        parts = [policy_state(k), self._goal_features(k)]
-        if self.tracking:
-            parts.append(self._phase_features())
-        return torch.cat(parts, dim=1)
+    def _pose_error(self, obs: torch.Tensor, ref: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """((N,) m, (N, 133)) as `CgailEnv._pose_error`: against the timed reference `ref`, or, for skills with
+        a heading goal, against their clip's closest frame (every env is scored both ways; a mask picks)."""
+        timed = reference_pose_error(obs, ref)
+        each = pose_key_error(pose_keys(obs)[:, None], self.ref_keys[self.cmd])  # (N, T); padding repeats frames
+        closest, best = each.min(dim=1)
+        goal = self.has_goal[self.cmd]
+        scored = torch.where(goal[:, None], self.ref_obs[self.cmd, best], ref)
+        return torch.where(goal, closest, timed), scored
 
-    def _advance_phase(self) -> tuple[torch.Tensor, torch.Tensor]:
-        """Step every env's reference frame; returns (reference obs at the new frame, clip ended)."""
-        last = self.clip_frames[self.cmd] - 1
-        loop = self.clip_loops[self.cmd]
-        nxt = self.ref_frame + 1
-        self.ref_frame = torch.where(loop, nxt % torch.clamp(last, min=1), torch.minimum(nxt, last))
-        ended = ~loop & (nxt >= last)
-        return self.ref_obs[self.cmd, self.ref_frame], ended
+    def _restart_reference_after_ramp(self) -> None:
+        """Envs whose command ramp has just finished: the new clip's reference starts at frame 0."""
+        start = ~self.ref_active & (self.w >= 1.0)
+        self.ref_frame = torch.where(start, torch.zeros_like(self.ref_frame), self.ref_frame)
+        self.ref_grace = torch.where(start, torch.full_like(self.ref_grace, self.pose_grace), self.ref_grace)
+        self.ref_active = self.ref_active | start
 
     @property
     def state(self) -> torch.Tensor:
@@ -242,32 +286,52 @@ class CgailDeviceEnv:
         targets = self.rest + self.cfg.action_scale * torch.as_tensor(actions, dtype=torch.float32, device=self.device)
         unstable = self.sim.step(targets, force=force, force_substeps=force_substeps)
         k = sim_kinematics(self.sim)
-        pair_next = disc_obs(k)
-        if self.tracking:
+        zeros = torch.zeros(self.N, device=self.device)
+        clip_ended = no_pose_end = torch.zeros(self.N, dtype=torch.bool, device=self.device)
+        if self.tracking:  # the phase in the state is the new one
             ref, clip_ended = self._advance_phase()
-            r_track = tracking_reward(pair_next, ref)
-        else:
-            clip_ended = torch.zeros(self.N, dtype=torch.bool, device=self.device)
-            r_track = torch.zeros(self.N, device=self.device)
-        final_state = self._policy_state(k)
+        elif self.timed_reference:
+            ref, _ = self._advance_phase(restart=True)
+        final_state, pair_next = self._features(k)
+        r_track = tracking_reward(pair_next, ref) if self.tracking else zeros
         r_goal = goal_reward(
             self.goal_angle, k.com_vel, self.speed[self.cmd], self.has_goal[self.cmd], self.cfg.goal_sharpness
         )
         fell = self.sim.non_foot_ground_contact(self.cfg.fall_tolerance)
+        pose_ended = no_pose_end
+        if self.pose_threshold > 0:
+            checked = self.ref_active & (self.ref_grace == 0) & ~(fell | unstable)
+            err, scored = self._pose_error(pair_next, ref)
+            pose_ended = checked & (err > self.pose_threshold)
+            if self.reference_reward:  # reward.w_track: the tracking reward where the reference is checked
+                r_track = torch.where(checked, tracking_reward(pair_next, scored), zeros)
         self.steps = self.steps + 1
-        terminated, truncated = episode_end(fell, unstable, self.steps, self.max_steps, clip_ended)
+        terminated, truncated = episode_end(fell, unstable, pose_ended, self.steps, self.max_steps, clip_ended)
         self._falls += fell.sum()
         done = terminated | truncated
+        if self.cfg.skill_fall_weight > 0:  # a pose-error end counts as a failure of the skill, like a fall
+            self.fall_rate = update_fall_rates(
+                self.fall_rate, self.cmd, done, fell | pose_ended, self.cfg.skill_fall_halflife
+            )
         self._state, self._obs = final_state, pair_next
         self._advance_ramp()
+        if self.timed_reference:
+            self._restart_reference_after_ramp()
         self.reset(done)
         self._maybe_switch(~done)
         return DeviceStepResult(
-            self._state, self._obs, pair_next, final_state, r_goal, r_track, terminated, truncated, unstable
+            self._state, self._obs, pair_next, final_state, r_goal, r_track, terminated, truncated, unstable, pose_ended
         )
 
     def _maybe_switch(self, mask: torch.Tensor) -> None:
         if self.K < 2 or self.cfg.switch_prob <= 0 or self.forced_command is not None:
             return
         switch = mask & (self._rand() < self.cfg.switch_prob)
-        self.set_command(switch, self._randint(self.K))
+        self.set_command(switch, self._sample_skills())
+
+    def _sample_skills(self) -> torch.Tensor:
+        """(N,) commands: uniform, or partly fall-weighted (env.skill_fall_weight; `rules.skill_probabilities`)."""
+        if self.cfg.skill_fall_weight <= 0 or self.K < 2:
+            return self._randint(self.K)
+        p = skill_probabilities(self.fall_rate, self.cfg.skill_fall_weight)
+        return torch.multinomial(p, self.N, replacement=True, generator=self.generator)

@@ -1,7 +1,10 @@
 """Policy state s_t and discriminator observation o_t (docs/cgail.md, §5.1-5.2), from kinematic arrays.
 
 The same functions serve the simulator (exact velocities from MuJoCo) and the motion clips
-(finite differences), so data and policy samples share one definition. Everything is in the
+(finite differences), so data and policy samples share one definition, and they are written once
+for numpy and torch arrays alike (the array API via `array_compat`): the CPU backend passes
+numpy arrays (fastest there), the on-device backend (env.backend=warp) and the web graph torch
+tensors, so the two backends cannot drift. Everything is in the
 character's heading frame: the root's yaw about +y is removed, so +x is the facing direction,
 y is up and +z the character's right (the paper's frame with z forward is this one turned by
 90 degrees about y; only the axis naming differs). Units: metres, m/s, rad/s.
@@ -18,10 +21,12 @@ from __future__ import annotations
 
 import functools
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
 from charctl.motion import rotations as R
+from charctl.motion.array_compat import Array, namespace, rotations_for
 from charctl.motion.skeleton import END_EFFECTORS, load_skeleton
 
 STATE_DIM = 241
@@ -30,28 +35,46 @@ DISC_OBS_DIM = 133
 
 @dataclass
 class Kinematics:
-    """World-frame kinematic arrays of a batch of characters (leading dim N)."""
+    """World-frame kinematic arrays of a batch of characters (leading dim N): numpy arrays or torch
+    tensors (all of one kind), y-up, SI units."""
 
-    body_pos: np.ndarray  # (N, 15, 3) body frame origins
-    body_rot: np.ndarray  # (N, 15, 4) xyzw
-    lin_vel: np.ndarray  # (N, 15, 3)
-    ang_vel: np.ndarray  # (N, 15, 3)
-    com: np.ndarray  # (N, 3)
-    com_vel: np.ndarray  # (N, 3)
-    body_mat: np.ndarray | None = None  # (N, 15, 3, 3) rotation matrices of body_rot, when already computed
+    body_pos: Array  # (N, 15, 3) body frame origins, m
+    body_rot: Array  # (N, 15, 4) xyzw
+    lin_vel: Array  # (N, 15, 3) m/s of the body frame origins
+    ang_vel: Array  # (N, 15, 3) rad/s
+    com: Array  # (N, 3) whole-body centre of mass, m
+    com_vel: Array  # (N, 3) m/s
+    body_mat: Array | None = None  # (N, 15, 3, 3) rotation matrices of body_rot, when already computed
 
 
-def heading_inverse(root_rot: np.ndarray) -> np.ndarray:
+def heading_inverse(root_rot: Array) -> Array:
     """(N, 4) quaternion removing the root's heading (rotation by -yaw about +y)."""
-    return R.heading_quat(-R.yaw_about_y(root_rot))
+    RX = rotations_for(root_rot)
+    return RX.heading_quat(-RX.yaw_about_y(root_rot))
 
 
 @functools.lru_cache(maxsize=1)
-def _indices():
-    """(skeleton, end-effector body indices), built once."""
+def _skeleton_indices() -> dict[str, np.ndarray]:
+    """Skeleton index arrays: end effectors, the clip joints' bodies and their parents."""
     skel = load_skeleton()
-    ee = np.array([skel.index(n) for n in END_EFFECTORS])
-    return skel, ee
+    joints = np.asarray(skel.clip_joint_bodies)
+    return {
+        "ee": np.array([skel.index(n) for n in END_EFFECTORS]),
+        "joints": joints,
+        "parents": np.asarray(skel.parents)[joints],
+    }
+
+
+@functools.lru_cache(maxsize=8)
+def _torch_indices(device: str) -> dict[str, Any]:
+    import torch
+
+    return {k: torch.as_tensor(v, device=device) for k, v in _skeleton_indices().items()}
+
+
+def _indices(x: Array) -> dict[str, Any]:
+    """`_skeleton_indices` as arrays of `x`'s library (and device)."""
+    return _skeleton_indices() if isinstance(x, np.ndarray) else _torch_indices(str(x.device))
 
 
 @dataclass
@@ -61,40 +84,41 @@ class HeadingFrame:
     Rotations are applied as 3x3 matrices (batched matmul): one quaternion-to-matrix conversion of
     every body serves the body rotations of the state and the local joint rotations of o."""
 
-    h_t: np.ndarray  # (N, 3, 3) transpose of the matrix removing the root's yaw: v_heading = v @ h_t
-    body_mat: np.ndarray  # (N, 15, 3, 3) world rotation matrices of the bodies
-    root: np.ndarray  # (N, 3) world root position
-    rel: np.ndarray  # (N, 15, 3) body positions relative to the root, heading frame
-    lin: np.ndarray  # (N, 15, 3) body linear velocities, heading frame
+    h_t: Array  # (N, 3, 3) transpose of the matrix removing the root's yaw: v_heading = v @ h_t
+    body_mat: Array  # (N, 15, 3, 3) world rotation matrices of the bodies
+    root: Array  # (N, 3) world root position
+    rel: Array  # (N, 15, 3) body positions relative to the root, heading frame
+    lin: Array  # (N, 15, 3) body linear velocities, heading frame
 
-    def rotate(self, v: np.ndarray) -> np.ndarray:
+    def rotate(self, v: Array) -> Array:
         """(N, 3) or (N, B, 3) world vectors in the heading frame."""
         if v.ndim == 2:
-            return np.matmul(v[:, None, :], self.h_t)[:, 0]
-        return np.matmul(v, self.h_t)
+            return (v[:, None, :] @ self.h_t)[:, 0]
+        return v @ self.h_t
 
 
 def heading_frame(k: Kinematics) -> HeadingFrame:
     """The shared heading-frame terms of a batch (reuses `k.body_mat` when the caller has it)."""
+    RX = rotations_for(k.body_pos)
     root = k.body_pos[:, 0]
-    h_t = np.swapaxes(R.to_matrix(heading_inverse(k.body_rot[:, 0])), 1, 2)
-    rel = np.matmul(k.body_pos - root[:, None], h_t)
-    body_mat = R.to_matrix(k.body_rot) if k.body_mat is None else k.body_mat
-    return HeadingFrame(h_t, body_mat, root, rel, np.matmul(k.lin_vel, h_t))
+    h_t = RX.to_matrix(heading_inverse(k.body_rot[:, 0])).swapaxes(-1, -2)
+    rel = (k.body_pos - root[:, None]) @ h_t
+    body_mat = RX.to_matrix(k.body_rot) if k.body_mat is None else k.body_mat
+    return HeadingFrame(h_t, body_mat, root, rel, k.lin_vel @ h_t)
 
 
-def _first_two_columns(m: np.ndarray) -> np.ndarray:
+def _first_two_columns(m: Array) -> Array:
     """(..., 3, 3) rotation matrices -> (..., 6): their first two columns (the 6-D rotation features)."""
-    return np.concatenate([m[..., :, 0], m[..., :, 1]], axis=-1)
+    return namespace(m).concat([m[..., :, 0], m[..., :, 1]], axis=-1)
 
 
-def policy_state(k: Kinematics, f: HeadingFrame | None = None) -> np.ndarray:
+def policy_state(k: Kinematics, f: HeadingFrame | None = None) -> Array:
     """(N, 241) policy state in the heading frame (`f`: the batch's heading frame if already computed)."""
-    _, ee = _indices()
+    ee = _indices(k.body_pos)["ee"]
     f = heading_frame(k) if f is None else f
     N = k.body_pos.shape[0]
-    h = np.swapaxes(f.h_t, 1, 2)  # the heading matrix itself
-    rot = _first_two_columns(np.matmul(h[:, None], f.body_mat))
+    h = f.h_t.swapaxes(-1, -2)  # the heading matrix itself
+    rot = _first_two_columns(h[:, None] @ f.body_mat)
     parts = [
         f.root[:, 1:2],
         f.rel[:, 1:].reshape(N, -1),
@@ -105,17 +129,16 @@ def policy_state(k: Kinematics, f: HeadingFrame | None = None) -> np.ndarray:
         f.rotate(k.com_vel),
         f.rel[:, ee].reshape(N, -1),
     ]
-    return np.concatenate(parts, axis=1)
+    return namespace(f.rel).concat(parts, axis=1)
 
 
-def disc_obs(k: Kinematics, f: HeadingFrame | None = None) -> np.ndarray:
+def disc_obs(k: Kinematics, f: HeadingFrame | None = None) -> Array:
     """(N, 133) discriminator observation o_t in the heading frame (no command in it)."""
-    skel, ee = _indices()
+    ix = _indices(k.body_pos)
+    ee = ix["ee"]
     f = heading_frame(k) if f is None else f
     N = k.body_pos.shape[0]
-    joints = skel.clip_joint_bodies
-    parents = skel.parents[joints]
-    local = np.matmul(np.swapaxes(f.body_mat[:, parents], -1, -2), f.body_mat[:, joints])  # R_parent^T R_child
+    local = f.body_mat[:, ix["parents"]].swapaxes(-1, -2) @ f.body_mat[:, ix["joints"]]  # R_parent^T R_child
     parts = [
         f.root[:, 1:2],
         f.lin[:, 0],
@@ -124,10 +147,10 @@ def disc_obs(k: Kinematics, f: HeadingFrame | None = None) -> np.ndarray:
         f.lin[:, 1:].reshape(N, -1),
         f.rel[:, ee].reshape(N, -1),
     ]
-    return np.concatenate(parts, axis=1)
+    return namespace(f.rel).concat(parts, axis=1)
 
 
-def state_and_obs(k: Kinematics) -> tuple[np.ndarray, np.ndarray]:
+def state_and_obs(k: Kinematics) -> tuple[Array, Array]:
     """(policy_state(k), disc_obs(k)) with their shared heading-frame terms computed once."""
     f = heading_frame(k)
     return policy_state(k, f), disc_obs(k, f)

@@ -51,7 +51,7 @@ def collect_rollout(
     torch.set_num_threads(1)
     try:
         if getattr(env, "on_device", False):  # env.backend=warp: everything stays on the device
-            return _collect_rollout_device(agent, env, steps, deterministic)
+            return _collect_rollout_device(agent, env, steps, deterministic, terminate)
         return _collect_rollout(agent, env, steps, deterministic, terminate)
     finally:
         torch.set_num_threads(threads)
@@ -141,9 +141,12 @@ def _count_episode_ends(ro: Rollout, res, done: np.ndarray, steps_before: np.nda
     ro.pose_ends += int(pose_ended.sum())
 
 
-def _collect_rollout_device(agent: Agent, env, steps: int, deterministic: bool) -> Rollout:
+def _collect_rollout_device(
+    agent: Agent, env, steps: int, deterministic: bool, terminate: LowStyleTermination | None = None
+) -> Rollout:
     """`_collect_rollout` for the device env (`CgailDeviceEnv`, env.backend=warp): every buffer lives on
-    the env's device and the loop never reads a value back to the host. Truncated envs' final states
+    the env's device and the loop never reads a value back to the host (the low-style termination resets
+    by mask). Truncated envs' final states
     are kept and bootstrapped with one critic forward after the loop (same parameters as during the
     loop, so the same values); episode lengths and counters are read once per rollout."""
     N = env.N
@@ -155,7 +158,10 @@ def _collect_rollout_device(agent: Agent, env, steps: int, deterministic: bool) 
     ep_len = torch.zeros(steps, N, dtype=torch.long, device=dev)
     unstable = torch.zeros((), dtype=torch.long, device=dev)
     falls = torch.zeros((), dtype=torch.long, device=dev)
+    pose_ends = torch.zeros((), dtype=torch.long, device=dev)
+    style_ends = torch.zeros((), dtype=torch.long, device=dev)
     zeros = torch.zeros(N, device=dev)
+    no_pose_end = torch.zeros(N, dtype=torch.bool, device=dev)
     for t in range(steps):
         obs = env.state
         blend = env.command_blend()
@@ -168,14 +174,22 @@ def _collect_rollout_device(agent: Agent, env, steps: int, deterministic: bool) 
         ro.pairs[t] = torch.cat([o_t, res.pair_next], dim=1)
         ro.r_goal[t], ro.r_track[t] = res.r_goal, res.r_track
         done = res.terminated | res.truncated
+        if terminate is not None:  # low style for too long: reset now (the mask may be all false)
+            low = terminate.update(ro.pairs[t], blend, done)
+            env.reset(low)
+            done = done | low
+            style_ends += low.sum()
         final_states[t], truncated[t], ended[t] = res.final_state, res.truncated, done
         ep_len[t] = steps_before + 1
         ro.storage.add(obs, cond, action, logp, value, zeros, done)
+        pose_ended = res.pose_ended if res.pose_ended is not None else no_pose_end
         unstable += res.unstable.sum()
-        falls += (res.terminated & ~res.unstable).sum()
+        falls += (res.terminated & ~res.unstable & ~pose_ended).sum()
+        pose_ends += pose_ended.sum()
     if bool(truncated.any()):  # the rollout's only host reads: this, the lengths and the two counters
         with torch.no_grad():
             v_final = agent.model.value(final_states[truncated], ro.cond[truncated] if agent.conditional else None)
         ro.bootstrap[truncated] = agent.cfg.ppo.gamma * v_final
     ro.episode_lengths, ro.unstable, ro.falls = ep_len[ended].tolist(), int(unstable), int(falls)
+    ro.pose_ends, ro.style_ends = int(pose_ends), int(style_ends)
     return ro

@@ -58,28 +58,20 @@ class CgailLearner(AgentCounters):
         self.device = resolve_device(str(cfg.device))  # auto -> cuda when available, else cpu
         self.backend = resolve_backend(str(getattr(cfg.env, "backend", "cpu")), self.device)  # cpu | warp
         self.agent = build_agent(cfg, self.device)
+        env_class = CgailEnv
+        env_args = dict(
+            seed=cfg.seed,
+            conditional=self.agent.conditional,
+            tracking=cfg.reward.kind == "tracking",
+            pose_error_threshold=cfg.reward.pose_error_threshold,
+            pose_error_grace_steps=cfg.reward.pose_error_grace_steps,
+            reference_reward=cfg.reward.w_track > 0,
+        )
         if self.backend == "warp":  # MuJoCo Warp on the same device: rollout never leaves it
             from charctl.experiments.cgail.env_torch import CgailDeviceEnv
 
-            self.env = CgailDeviceEnv(
-                self.agent.skills,
-                cfg.env,
-                seed=cfg.seed,
-                conditional=self.agent.conditional,
-                tracking=cfg.reward.kind == "tracking",
-                device=self.device,
-            )
-        else:
-            self.env = CgailEnv(
-                self.agent.skills,
-                cfg.env,
-                seed=cfg.seed,
-                conditional=self.agent.conditional,
-                tracking=cfg.reward.kind == "tracking",
-                pose_error_threshold=cfg.reward.pose_error_threshold,
-                pose_error_grace_steps=cfg.reward.pose_error_grace_steps,
-                reference_reward=cfg.reward.w_track > 0,
-            )
+            env_class, env_args["device"] = CgailDeviceEnv, self.device
+        self.env = env_class(self.agent.skills, cfg.env, **env_args)
         self.samples_per_iteration = cfg.train.rollout_steps * self.env.N
         self.episode_lengths: list = []
         self.rng = np.random.default_rng(cfg.seed + 7919)

@@ -3,7 +3,7 @@
 `charctl export RUN --web DIR` (docs/web.md) runs the policy in a browser: MuJoCo in WebAssembly
 steps the humanoid and onnxruntime-web evaluates this graph once per control step. The page copies
 MuJoCo's arrays in and the PD targets out; everything in between is computed here, by the project's
-own torch functions (`features_torch.policy_state` / `disc_obs`, the policy's normaliser and MLP,
+own functions (`features.policy_state` / `disc_obs` on torch tensors, the policy's normaliser and MLP,
 the discriminator's class head), so there is no second implementation of the features in JavaScript.
 
 Inputs (batch B, float64; MuJoCo's arrays as `mjData` holds them after a step, all bodies and geoms of
@@ -36,14 +36,14 @@ import torch
 from torch import nn
 
 from charctl.errors import CharctlError
-from charctl.experiments.cgail.env import GOAL_DIM
-from charctl.experiments.cgail.features_torch import (
+from charctl.experiments.cgail.features import (
     DISC_OBS_DIM,
-    STATE_DIM,
     Kinematics,
     disc_obs,
+    heading_frame,
     policy_state,
 )
+from charctl.experiments.cgail.rules import goal_features
 from charctl.motion import rotations_torch as RT
 from charctl.motion.skeleton import FEET, load_skeleton
 
@@ -151,7 +151,6 @@ class WebGraph(nn.Module):
         self.class_head = _frozen_linear(disc.class_head) if self.conditional else None
         scale = getattr(disc, "class_log_scale", None)
         self.class_scale = float(scale.detach().exp()) if scale is not None else 1.0
-        self.state_dim = STATE_DIM + GOAL_DIM
 
     def lowest_heights(self, geom_xpos: torch.Tensor, geom_xmat: torch.Tensor) -> torch.Tensor:
         """(B, G) lowest world y of every non-foot character geom (`batch._lowest_y`: spheres r, capsules
@@ -191,15 +190,15 @@ class WebGraph(nn.Module):
         onehot_goal = (self.skill_ids[None, :] == goal_skill[:, None]).to(f64)
         w = ramp_w[:, None]
         command = (1.0 - w) * onehot_from + w * onehot_to
-        # heading goal (env._goal_features): the goal's direction relative to the heading, 0 without a goal
-        rel = goal_yaw - RT.yaw_about_y(k.body_rot[:, 0])
-        goal = torch.stack([torch.cos(rel), torch.sin(rel)], dim=1) * (onehot_goal @ self.has_goal)[:, None]
-        parts = [policy_state(k), goal] + ([phase] if self.phase_obs else [])
+        # heading goal (rules.goal_features): the goal's direction relative to the heading, 0 without a goal
+        goal = goal_features(goal_yaw, RT.yaw_about_y(k.body_rot[:, 0]), (onehot_goal @ self.has_goal) > 0.5)
+        f = heading_frame(k)
+        parts = [policy_state(k, f), goal] + ([phase] if self.phase_obs else [])
         state = torch.cat(parts, dim=1)
         # the networks in float32, fed as the trainer feeds them (float64 features rounded to float32)
         action = self.policy(state.float(), command.float())
         ctrl = self.rest + self.action_scale * action.to(f64)
-        obs = disc_obs(k)
+        obs = disc_obs(k, f)
         pair = torch.cat([prev_obs, obs], dim=1).float()
         x = torch.clamp((pair - self.disc_mean) / self.disc_std, -self.disc_clip, self.disc_clip)
         h = self.disc_trunk(x)

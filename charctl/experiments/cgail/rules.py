@@ -1,0 +1,168 @@
+"""The cgail environment's rules, written once for both backends (numpy on the CPU, torch on the device).
+
+Pure functions of batched arrays (leading dim N): the heading-goal and clip-phase parts of the policy
+state, the DeepMimic-style tracking reward, the reference pose error, the heading-goal reward and the
+episode ends. `env.CgailEnv` calls them with numpy arrays, `env_torch.CgailDeviceEnv` and the web
+graph with torch tensors (`charctl.motion.array_compat`), so a rule change is one edit.
+
+Frames and units (docs/cgail.md): the disc observation o (133) is in the heading frame (+x facing, y up,
++z right), metres, m/s, radians; yaw angles are about world +y.
+"""
+
+from __future__ import annotations
+
+import math
+
+from charctl.motion.array_compat import Array, device_of, namespace
+
+GOAL_DIM = 2  # (cos, sin) of the heading goal relative to the heading (`goal_features`)
+PHASE_DIM = 2  # (cos, sin) of the clip phase (`phase_features`): tracking baseline and env.phase_obs
+
+
+def state_dim(phase: bool) -> int:
+    """Width of the policy state: the features (`features.STATE_DIM`), the heading goal and, for the
+    tracking baseline or a run with env.phase_obs (`phase`), the clip phase."""
+    from charctl.experiments.cgail.features import STATE_DIM
+
+    return STATE_DIM + GOAL_DIM + (PHASE_DIM if phase else 0)
+
+
+# DeepMimic-style tracking reward (reward.kind=tracking), computed on the discriminator
+# observation o (heading frame, so it is invariant to the character's yaw): weights and scales
+# of the pose, velocity, end-effector and root ("COM") terms. See docs/cgail.md, "Tracking baseline".
+TRACK_WEIGHTS = {"pose": 0.65, "vel": 0.1, "ee": 0.15, "root": 0.1}
+TRACK_SCALES = {"pose": 1.0, "vel": 0.1, "ee": 40.0, "root_height": 10.0, "root_vel": 1.0}
+# slices of o: root height, root linear velocity, joint rotations (12x6), body velocities (14x3), end effectors (4x3)
+OBS_ROOT_H, OBS_ROOT_V, OBS_ROT, OBS_VEL, OBS_EE = (
+    slice(0, 1),
+    slice(1, 4),
+    slice(7, 79),
+    slice(79, 121),
+    slice(121, 133),
+)
+
+
+def tracking_reward(obs: Array, ref: Array) -> Array:
+    """(N,) r in [0, 1] between simulated and reference disc observations (N, 133).
+
+    r = 0.65 exp(-1 sum_j |rot6_j - rot6*_j|^2) + 0.1 exp(-0.1 sum_b |v_b - v*_b|^2)
+      + 0.15 exp(-40 sum_e |p_e - p*_e|^2) + 0.1 exp(-10 (h - h*)^2 - |v_root - v*_root|^2)
+    (joint rotations as the first two rotation-matrix columns; velocities in m/s; positions in m,
+    relative to the root in the heading frame).
+    """
+    xp = namespace(obs, ref)
+
+    def sq(sl: slice) -> Array:
+        return xp.sum((obs[:, sl] - ref[:, sl]) ** 2, axis=1)
+
+    w, k = TRACK_WEIGHTS, TRACK_SCALES
+    root = xp.exp(-k["root_height"] * sq(OBS_ROOT_H) - k["root_vel"] * sq(OBS_ROOT_V))
+    return (
+        w["pose"] * xp.exp(-k["pose"] * sq(OBS_ROT))
+        + w["vel"] * xp.exp(-k["vel"] * sq(OBS_VEL))
+        + w["ee"] * xp.exp(-k["ee"] * sq(OBS_EE))
+        + w["root"] * root
+    )
+
+
+def pose_keys(obs: Array) -> Array:
+    """(..., 13) the parts of disc observations (..., 133) the pose error compares: root height, then the
+    four end effectors' positions (m, relative to the root in the heading frame)."""
+    xp = namespace(obs)
+    return xp.concat([obs[..., OBS_ROOT_H], obs[..., OBS_EE]], axis=-1)
+
+
+def pose_key_error(a: Array, b: Array) -> Array:
+    """(...) m: the largest of the four end-effector distances and the root-height difference between
+    `pose_keys` arrays `a` and `b` (..., 13), which broadcast (e.g. (n, 1, 13) against (1, T, 13))."""
+    xp = namespace(a, b)
+    d = a[..., 1:] - b[..., 1:]
+    d = d.reshape(d.shape[:-1] + (4, 3))
+    ee = xp.max(xp.sqrt(xp.sum(d * d, axis=-1)), axis=-1)
+    return xp.maximum(ee, xp.abs(a[..., 0] - b[..., 0]))
+
+
+def reference_pose_error(obs: Array, ref: Array) -> Array:
+    """(N,) m: the largest distance between simulated and reference disc observations (N, 133) over the
+    four end effectors (hands and feet, relative to the root in the heading frame) and the root height."""
+    return pose_key_error(pose_keys(obs), pose_keys(ref))
+
+
+def goal_features(goal_angle: Array, heading: Array, has_goal: Array) -> Array:
+    """(N, 2) state part of the heading goal: (cos, sin) of the goal's world yaw `goal_angle` relative to
+    the root's `heading` (radians about +y), zero where the commanded skill has no goal (`has_goal` bool)."""
+    xp = namespace(goal_angle, heading)
+    rel = goal_angle - heading
+    return xp.stack([xp.cos(rel), xp.sin(rel)], axis=1) * xp.astype(has_goal, rel.dtype)[:, None]
+
+
+def phase_features(frame: Array, clip_frames: Array, shown: Array | None = None) -> Array:
+    """(N, 2) (cos, sin) of the clip phase 2 pi frame / (clip_frames - 1) (frames counted from 0); zero
+    where `shown` (bool, env.phase_obs: no heading goal and the reference running) is false."""
+    xp = namespace(frame, clip_frames)
+    phase = 2.0 * math.pi * frame / xp.clip(clip_frames - 1, min=1)
+    out = xp.stack([xp.cos(phase), xp.sin(phase)], axis=1)
+    return out if shown is None else out * xp.astype(shown, out.dtype)[:, None]
+
+
+def goal_reward(goal_angle: Array, com_vel: Array, target_speed: Array, has_goal: Array, sharpness: float) -> Array:
+    """(N,) heading-goal reward r_G in [0, 1]: exp(-sharpness (v* - d . v_xz)^2) with d the goal's
+    horizontal direction (world yaw `goal_angle` radians about +y -> (cos, -sin) in x-z), v the COM
+    velocity (m/s) and v* the skill's mean speed (m/s); 1 for skills without a heading goal."""
+    xp = namespace(goal_angle, com_vel)
+    along = xp.cos(goal_angle) * com_vel[:, 0] - xp.sin(goal_angle) * com_vel[:, 2]
+    r = xp.exp(-sharpness * (target_speed - along) ** 2)
+    return xp.where(has_goal, r, xp.ones_like(r))
+
+
+def episode_end(
+    fell: Array, unstable: Array, pose_ended: Array, steps: Array, max_steps: int, clip_ended: Array
+) -> tuple[Array, Array]:
+    """(terminated, truncated) bool masks: a fall (a non-foot body on the ground), a simulator blow-up or a
+    large pose error terminates; reaching `max_steps` control steps (`steps` counted after this step) or
+    the end of a non-looping reference clip truncates, unless the step also terminated."""
+    terminated = fell | unstable | pose_ended
+    truncated = ((steps >= max_steps) | clip_ended) & ~terminated
+    return terminated, truncated
+
+
+def advance_reference(frame: Array, loops: Array, clip_frames: Array, restart: bool) -> tuple[Array, Array, Array]:
+    """One control step of the timed reference: (new frame, clip ended, restarted), all (N,).
+
+    `frame` the reference clip frame of each env, `loops` whether its clip loops (bool), `clip_frames` its
+    length in frames. A looping clip wraps to frame (frame + 1) mod (clip_frames - 1) (its last frame is its
+    first). A non-looping clip stops at its last frame and reports `clip ended` (the tracking baseline
+    truncates there) or, with `restart` (the pose-error reference and env.phase_obs), starts again at
+    frame 0 and reports `restarted` (the caller grants grace steps)."""
+    xp = namespace(frame, clip_frames)
+    last = xp.clip(clip_frames - 1, min=1)
+    nxt = frame + 1
+    if restart:
+        again = ~loops & (nxt > last)
+        new = xp.where(again, xp.zeros_like(nxt), xp.where(loops, nxt % last, nxt))
+        return new, xp.zeros_like(again), again
+    ended = ~loops & (nxt >= last)
+    return xp.where(loops, nxt % last, xp.minimum(nxt, last)), ended, xp.zeros_like(ended)
+
+
+def update_fall_rates(rates: Array, skill: Array, ended: Array, failed: Array, halflife: float) -> Array:
+    """Per-skill exponential moving average of the failure indicator over ended episodes (env.skill_fall_weight).
+
+    `rates` (K,) in [0, 1]; `skill` (N,) each env's command, `ended` (N,) bool its episode ended this step,
+    `failed` (N,) bool it ended by a fall or a large pose error. A skill with m ended episodes and f
+    failures moves to a^m rates + (1 - a^m) f/m with a = 0.5^(1/halflife): its memory halves every
+    `halflife` episodes."""
+    xp = namespace(rates, skill)
+    of_skill = xp.astype(skill[:, None] == xp.arange(rates.shape[0], device=device_of(skill))[None, :], rates.dtype)
+    m = xp.sum(of_skill * xp.astype(ended, rates.dtype)[:, None], axis=0)
+    f = xp.sum(of_skill * xp.astype(ended & failed, rates.dtype)[:, None], axis=0)
+    keep = 0.5 ** (m / halflife)
+    return keep * rates + (1.0 - keep) * (f / xp.maximum(m, xp.ones_like(m)))
+
+
+def skill_probabilities(rates: Array, fall_weight: float, floor: float = 1e-3) -> Array:
+    """(K,) command probabilities: (1 - fall_weight) uniform + fall_weight in proportion to
+    `rates` + `floor` (the floor keeps a share for skills that never fall)."""
+    xp = namespace(rates)
+    w = rates + floor
+    return (1.0 - fall_weight) / rates.shape[0] + fall_weight * w / xp.sum(w)

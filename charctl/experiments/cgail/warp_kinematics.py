@@ -1,0 +1,44 @@
+"""Kinematics of the on-device simulator (env.backend=warp) as torch tensors, for the shared features.
+
+The policy state, discriminator observation, rewards and episode ends are `features.py` and
+`rules.py`, written once for numpy and torch (`charctl.motion.array_compat`); this module only reads
+a `WarpBatchedHumanoid` into their `Kinematics`, on its device, without a host round trip. The CPU
+backend's twin is `features.sim_kinematics` (MuJoCo's C arrays); `tests/test_gpu_path.py` holds the
+two equal on the same states.
+
+Frames and units: world y-up, metres, m/s, rad/s; quaternions xyzw.
+"""
+
+from __future__ import annotations
+
+import functools
+
+import torch
+
+from charctl.experiments.cgail.features import Kinematics
+from charctl.motion import rotations_torch as RT
+from charctl.motion.skeleton import load_skeleton
+
+
+@functools.lru_cache(maxsize=8)
+def _mass_tables(device: str) -> tuple[torch.Tensor, torch.Tensor]:
+    """(body masses (15,), local COM offsets (15, 3)) on `device`, float64."""
+    skel = load_skeleton()
+    dev = torch.device(device)
+    masses = torch.as_tensor(skel.masses, dtype=torch.float64, device=dev)
+    return masses, torch.as_tensor(skel.com_local, dtype=torch.float64, device=dev)
+
+
+def sim_kinematics(sim) -> Kinematics:
+    """Kinematics of a `WarpBatchedHumanoid` after a step (exact MuJoCo velocities), on its device.
+
+    COM velocity = mass-weighted velocities of the body centres of mass (frame origin + rotated
+    local COM offset), as in `features.sim_kinematics`.
+    """
+    lin, ang = sim.body_velocities()
+    pos, rot = sim.body_pos, sim.body_quat_xyzw
+    masses, com_local = (t.to(pos.dtype) for t in _mass_tables(str(pos.device)))
+    offset = RT.rotate(rot, com_local.expand(pos.shape))
+    com_vel_bodies = lin + torch.cross(ang, offset, dim=-1)
+    com_vel = torch.einsum("nbi,b->ni", com_vel_bodies, masses) / sim.total_mass
+    return Kinematics(pos, rot, lin, ang, sim.com().clone(), com_vel)
