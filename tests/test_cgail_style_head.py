@@ -306,3 +306,28 @@ def test_resume_with_overrides_records_them_in_the_run_config(smoke_run_copy):
     cfg = OmegaConf.load(run_dir / "config.yaml")
     assert cfg.train.total_samples == 1024 and cfg.reward.low_style_threshold == 0.05
     assert "reward.low_style_threshold=0.05" in (run_dir / "resumes.txt").read_text()
+
+
+def test_frozen_copy_scores_as_the_eval_mode_discriminator_and_leaves_it_working():
+    """`frozen_copy`: plain Linears with the spectral-normalised weights computed once give the eval-mode
+    outputs (float32 rounding), hold no parametrization, and the original (trained a step) still works."""
+    from torch.nn.utils import parametrize
+
+    from charctl.experiments.cgail.discriminator import Discriminator, frozen_copy
+
+    torch.manual_seed(0)
+    disc = Discriminator(12, 3, [16, 16], style_head="per_skill")
+    disc(torch.randn(64, 12), cond=torch.eye(3)[torch.randint(0, 3, (64,))])  # a training-mode pass: u, v move
+    pairs, cond = torch.randn(32, 12), torch.softmax(torch.randn(32, 3), -1)
+    frozen = frozen_copy(disc)
+    assert not any(parametrize.is_parametrized(m) for m in frozen.modules())
+    assert not any(p.requires_grad for p in frozen.parameters())
+    with torch.no_grad():
+        want = disc.eval()(pairs, cond=cond)
+        got = frozen(pairs, cond=cond)
+    torch.testing.assert_close(got[0], want[0], rtol=0, atol=1e-6)
+    torch.testing.assert_close(got[1], want[1], rtol=0, atol=1e-6)
+    disc.train()
+    d, _ = disc(pairs, cond=cond)  # the original keeps its parametrizations and its gradients
+    d.sum().backward()
+    assert disc.trunk[0].parametrizations.weight.original.grad is not None

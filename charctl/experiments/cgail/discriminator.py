@@ -20,9 +20,12 @@ D(φ, c̄) = Σ_k c̄_k D_k(φ): data pairs use their clip's logit, policy pairs
 
 from __future__ import annotations
 
+import copy
+
 import torch
 import torch.nn.functional as F
 from torch import nn
+from torch.nn.utils import parametrize
 
 from charctl.nn.mlp import ACTIVATIONS, RunningNorm
 
@@ -79,6 +82,23 @@ class Discriminator(nn.Module):
         if self.class_log_scale is not None:
             logits = logits * self.class_log_scale.exp()
         return d, logits
+
+
+def frozen_copy(disc: Discriminator) -> Discriminator:
+    """An inference copy of `disc` whose spectral-normalised layers are plain Linears holding their effective
+    weights (W / sigma with the stored power-iteration vectors, as `disc.eval()` uses them), computed once
+    here instead of at every call; no gradients. `disc` itself is not changed. The rollout's low-style
+    check and the web graph score pairs with it."""
+    out = copy.deepcopy(disc).eval()
+    for parent in list(out.modules()):
+        for name, child in list(parent.named_children()):
+            if isinstance(child, nn.Linear) and parametrize.is_parametrized(child):
+                with torch.no_grad():
+                    plain = nn.Linear(child.in_features, child.out_features, device=child.bias.device)
+                    plain.weight.copy_(child.weight)
+                    plain.bias.copy_(child.bias)
+                setattr(parent, name, plain)
+    return out.requires_grad_(False)
 
 
 def style_loss(d_data: torch.Tensor, d_policy: torch.Tensor, kind: str = "lsgan") -> torch.Tensor:

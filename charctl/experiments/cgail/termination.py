@@ -12,22 +12,20 @@ because with the overlapped loop the training discriminator is updated in anothe
 
 from __future__ import annotations
 
-import copy
-
 import torch
 
-from charctl.experiments.cgail.discriminator import Discriminator, style_reward
+from charctl.experiments.cgail.discriminator import Discriminator, frozen_copy, style_reward
 
 
 class LowStyleTermination:
     def __init__(self, disc: Discriminator, num_envs: int, threshold: float, steps: int, objective: str):
-        self.disc = copy.deepcopy(disc).eval()
+        self.disc = frozen_copy(disc)  # spectral norms computed once per snapshot, not per step
         self.threshold, self.steps, self.objective = float(threshold), int(steps), objective
         self.low = torch.zeros(num_envs, dtype=torch.long, device=next(disc.parameters()).device)
 
     def sync(self, disc: Discriminator) -> None:
         """Take the training discriminator's current parameters (call while no update is running)."""
-        self.disc.load_state_dict(disc.state_dict())
+        self.disc = frozen_copy(disc)
 
     @torch.no_grad()
     def update(self, pairs: torch.Tensor, cond: torch.Tensor, done: torch.Tensor) -> torch.Tensor:

@@ -36,6 +36,7 @@ import torch
 from torch import nn
 
 from charctl.errors import CharctlError
+from charctl.experiments.cgail.discriminator import frozen_copy
 from charctl.experiments.cgail.features import (
     DISC_OBS_DIM,
     Kinematics,
@@ -142,13 +143,9 @@ class WebGraph(nn.Module):
         self.register_buffer("disc_mean", disc.norm.mean.detach().clone().float())
         self.register_buffer("disc_std", torch.sqrt(disc.norm.var + disc.norm.eps).detach().clone().float())
         self.disc_clip = float(disc.norm.clip)
-        layers: list[nn.Module] = []
-        for m in disc.trunk:
-            layers.append(_frozen_linear(m) if isinstance(m, nn.Linear) else type(m)())
-        self.disc_trunk = nn.Sequential(*layers)
-        self.style_head = _frozen_linear(disc.style_head)
+        frozen = frozen_copy(disc)
+        self.disc_trunk, self.style_head, self.class_head = frozen.trunk, frozen.style_head, frozen.class_head
         self.per_skill_style = bool(getattr(disc, "per_skill", False))
-        self.class_head = _frozen_linear(disc.class_head) if self.conditional else None
         scale = getattr(disc, "class_log_scale", None)
         self.class_scale = float(scale.detach().exp()) if scale is not None else 1.0
 
@@ -223,16 +220,6 @@ class _MeanAction(nn.Module):
 
     def forward(self, state: torch.Tensor, command: torch.Tensor) -> torch.Tensor:
         return self.model.mean_action(state, command)
-
-
-def _frozen_linear(m: nn.Module) -> nn.Linear:
-    """A plain Linear with the effective weight of `m` (spectral norm applied as in eval mode)."""
-    with torch.no_grad():
-        out = nn.Linear(m.in_features, m.out_features)
-        out.weight.copy_(m.weight)
-        out.bias.copy_(m.bias)
-    out.requires_grad_(False)
-    return out
 
 
 def graph_inputs(phase_obs: bool) -> tuple[str, ...]:
