@@ -85,6 +85,15 @@ repro-cgail-10skill-fidelity: install ## cgail: run H's recipe (G's plus the cli
 	T=$$(ls -d $(CGAIL_FID)/ten/cgail/*/ | tail -1); \
 	$(CHARCTL) eval $$T --checkpoints --after 50000000 -k 16 && $(CHARCTL) eval $$T --fidelity -k 4
 
+# The same run on a GPU (MuJoCo Warp; the env rules of the recipe run there since 2026-12-03): 4,096 envs,
+# so each PPO iteration takes 131,072 samples. Not yet run on a GPU: no device was lent when it was written;
+# tests/test_gpu_path.py trains the recipe's env rules on Warp-CPU at smoke scale.
+.PHONY: repro-cgail-10skill-fidelity-gpu
+repro-cgail-10skill-fidelity-gpu: install ## cgail: repro-cgail-10skill-fidelity on a CUDA GPU (env.backend=warp, 4,096 envs), every kept checkpoint evaluated
+	$(CHARCTL) train cgail scale=small "use_skills=[]" $(CGAIL_FID_FULL) env.phase_obs=true env.backend=warp device=cuda env.num_envs=4096 train.fidelity_every=5000000 train.total_samples=150000000 output_root=$(CGAIL_FID)/ten-gpu
+	T=$$(ls -d $(CGAIL_FID)/ten-gpu/cgail/*/ | tail -1); \
+	$(CHARCTL) eval $$T --checkpoints --after 50000000 -k 16 device=cpu && $(CHARCTL) eval $$T --fidelity -k 4 device=cpu
+
 .PHONY: repro-cgail-tracking-3skill
 repro-cgail-tracking-3skill: install ## cgail: the multi-skill tracking baseline (walk, run, right_kick; command and phase in the state), the fidelity anchor; not yet trained to the end here
 	$(CHARCTL) train cgail scale=small reward.kind=tracking env.switch_prob=0 ppo.desired_kl=0.02 ppo.lr_max=1e-4 train.total_samples=$(CGAIL_FID_SAMPLES) train.checkpoint_every=20 train.keep_checkpoint_every=2500000 seed=1 output_root=$(CGAIL_FID)/tracking
