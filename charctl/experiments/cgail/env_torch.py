@@ -118,16 +118,7 @@ class CgailDeviceEnv:
         self.max_steps = int(round(env_cfg.episode_seconds * env_cfg.control_hz))
         f32 = dict(dtype=torch.float32, device=dev)
         i64 = dict(dtype=torch.long, device=dev)
-        # per-skill tables on the device
-        self.rsi_qpos = _pad([s.qpos for s in skills], dev)  # (K, T, nq)
-        self.rsi_qvel = _pad([s.qvel for s in skills], dev)  # (K, T, nv)
-        self.ref_obs = _pad([s.obs for s in skills], dev)  # (K, T, 133)
-        self.ref_keys = pose_keys(self.ref_obs)  # (K, T, 13): what the pose error compares
-        self.clip_frames = torch.as_tensor([len(s.obs) for s in skills], **i64)
-        self.rsi_frames = torch.as_tensor([len(s.qpos) for s in skills], **i64)
-        self.clip_loops = torch.as_tensor([s.loop for s in skills], dtype=torch.bool, device=dev)
-        self.has_goal = torch.as_tensor([s.heading_goal for s in skills], dtype=torch.bool, device=dev)
-        self.speed = torch.as_tensor([s.mean_speed for s in skills], **f32)
+        self._load_skill_tables(skills)
         self.rest = torch.zeros(self.sim.layout.nu, **f32)
         # per-env state
         self.cmd = torch.zeros(self.N, **i64)  # B: current command
@@ -148,6 +139,20 @@ class CgailDeviceEnv:
         self._state = torch.zeros(self.N, self.state_dim, **f32)
         self._obs = torch.zeros(self.N, DISC_OBS_DIM, **f32)
         self.reset(torch.ones(self.N, dtype=torch.bool, device=dev))
+
+    def _load_skill_tables(self, skills: list[SkillData]) -> None:
+        """Per-skill tables on the device: RSI states and reference observations (padded to the longest clip
+        with its last row), clip lengths, looping, heading goals and mean speeds (m/s)."""
+        dev = self.device
+        self.rsi_qpos = _pad([s.qpos for s in skills], dev)  # (K, T, nq)
+        self.rsi_qvel = _pad([s.qvel for s in skills], dev)  # (K, T, nv)
+        self.ref_obs = _pad([s.obs for s in skills], dev)  # (K, T, 133)
+        self.ref_keys = pose_keys(self.ref_obs)  # (K, T, 13): what the pose error compares
+        self.clip_frames = torch.as_tensor([len(s.obs) for s in skills], dtype=torch.long, device=dev)
+        self.rsi_frames = torch.as_tensor([len(s.qpos) for s in skills], dtype=torch.long, device=dev)
+        self.clip_loops = torch.as_tensor([s.loop for s in skills], dtype=torch.bool, device=dev)
+        self.has_goal = torch.as_tensor([s.heading_goal for s in skills], dtype=torch.bool, device=dev)
+        self.speed = torch.as_tensor([s.mean_speed for s in skills], dtype=torch.float32, device=dev)
 
     # ------------------------------------------------------------------ random numbers
     def _rand(self) -> torch.Tensor:
