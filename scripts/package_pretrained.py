@@ -7,6 +7,10 @@ discriminator's replay buffer (tens of MB of policy samples that only a resumed 
 would use; a resume from the packaged checkpoint starts with an empty buffer). Everything else
 in the checkpoint (networks, optimisers, normalisers, counters, RNG states) is kept, so
 `charctl eval` and `charctl export` take the packaged directory like any run directory.
+`--inference-only` also leaves out the PPO and discriminator optimiser states (Adam's moments, two
+thirds of a cgail checkpoint): evaluation and export never read them, and a resume (fine-tuning a
+shipped policy) starts those optimisers fresh, saying so. Runs meant to be continued as they were
+(pretrained/in-progress/) keep them.
 
 The scalars are rewritten into one event file, each tag thinned to at most `--max-points` evenly
 spaced points (first and last kept, step and wall time unchanged; 0 = copy the event files as they
@@ -47,6 +51,14 @@ def write_thinned_scalars(src: Path, dest: Path, max_points: int, max_step: int 
     writer.close()
 
 
+def drop_optimizer_states(state: dict) -> None:
+    """Remove a cgail checkpoint state's optimiser states (PPO's and the discriminator's), in place, and
+    mark it `inference_only` (`agent.load_agent_state` then keeps freshly built optimisers)."""
+    state.get("ppo", {}).pop("optimizer", None)
+    state.pop("disc_opt", None)
+    state["inference_only"] = True
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("run_dir", type=Path)
@@ -57,6 +69,11 @@ def main() -> None:
         default="last.pt",
         help="file in RUN/checkpoints/ to ship as last.pt (e.g. a kept samples_<n>.pt); the scalars are cut at its "
         "sample count and metrics.json records which one it was",
+    )
+    ap.add_argument(
+        "--inference-only",
+        action="store_true",
+        help="leave out the optimiser states too (a resume then starts them fresh)",
     )
     a = ap.parse_args()
     import json
@@ -76,6 +93,8 @@ def main() -> None:
         raise SystemExit(f"error: checkpoint not found: {source}")
     payload = torch.load(source, map_location="cpu", weights_only=True)
     payload["state"].pop("replay", None)
+    if a.inference_only:
+        drop_optimizer_states(payload["state"])
     chosen = source.name != "last.pt"
     a.dest.mkdir(parents=True, exist_ok=True)
     for name in ("config.yaml", "metrics.json"):  # an interrupted run has no metrics.json

@@ -63,3 +63,31 @@ def test_packaging_a_kept_checkpoint_cuts_the_scalars_at_it(smoke_run_copy, tmp_
     steps, _ = read_scalars(dest / "tb")["train/episode_length"]
     assert max(steps) == 768 and max(read_scalars(src / "tb")["train/episode_length"][0]) == 1024
     assert json.loads((dest / "metrics.json").read_text())["packaged_checkpoint"]["samples"] == 768
+
+
+def test_an_inference_only_package_evaluates_and_fine_tunes_with_fresh_optimisers(
+    smoke_run, tmp_path, monkeypatch, capsys
+):
+    """--inference-only leaves out both optimiser states (the checkpoint shrinks); the package still loads for
+    evaluation with the same networks, and a resume trains on from it with fresh optimisers (a note says so)."""
+    from charctl.commands.train import train_command
+    from charctl.experiments.cgail.policy import load_trained_run
+
+    mod = _load_script()
+    src = smoke_run("cgail")
+    full, slim = tmp_path / "full", tmp_path / "slim"
+    for dest, extra in ((full, []), (slim, ["--inference-only"])):
+        monkeypatch.setattr("sys.argv", ["package_pretrained.py", str(src), str(dest), *extra])
+        mod.main()
+    payload = torch.load(slim / "checkpoints" / "last.pt", map_location="cpu", weights_only=True)
+    state = payload["state"]
+    assert state["inference_only"] and "disc_opt" not in state and set(state["ppo"]) == {"model"}
+    assert (slim / "checkpoints" / "last.pt").stat().st_size < 0.6 * (full / "checkpoints" / "last.pt").stat().st_size
+    a, b = load_trained_run(full), load_trained_run(slim)
+    for x, y in zip(a.agent.model.state_dict().values(), b.agent.model.state_dict().values(), strict=True):
+        assert torch.equal(x, y)
+    samples = int(state["samples"])
+    train_command("cgail", [f"train.total_samples={samples + 256}"], resume=slim)
+    assert "optimiser states" in capsys.readouterr().out
+    resumed = torch.load(slim / "checkpoints" / "last.pt", map_location="cpu", weights_only=True)["state"]
+    assert int(resumed["samples"]) > samples and "optimizer" in resumed["ppo"] and "disc_opt" in resumed

@@ -155,9 +155,14 @@ def load_agent_state(agent: Agent, state: dict, env: CgailEnv | None = None) -> 
     """Load `agent_state` output into a training agent (and `env`'s random-number state, when given)."""
     if not agent.training:
         raise ValueError("load_agent_state needs a training agent; load an inference agent with load_policy_state")
-    agent.ppo.load_state_dict(state["ppo"])
-    agent.disc.load_state_dict(state["disc"])
-    agent.disc_opt.load_state_dict(state["disc_opt"])
+    if state.get("inference_only"):  # scripts/package_pretrained.py --inference-only: no optimiser states
+        print("note: this checkpoint was packaged without optimiser states; PPO's and the discriminator's start fresh")
+        agent.model.load_state_dict(state["ppo"]["model"])
+        agent.disc.load_state_dict(state["disc"])
+    else:
+        agent.ppo.load_state_dict(state["ppo"])
+        agent.disc.load_state_dict(state["disc"])
+        agent.disc_opt.load_state_dict(state["disc_opt"])
     if "replay" in state:  # shipped (pretrained/) checkpoints leave the replay buffer out
         agent.replay.load_state_dict(state["replay"])
     agent.iteration, agent.samples = int(state["iteration"]), int(state["samples"])
