@@ -5,7 +5,12 @@ c̄ = (1 - w) c_A + w c_B, w rising linearly over `ramp_frames`), the step count
 locomotion skills, a heading goal. Reset = reference-state initialisation (RSI) from a random
 frame of the commanded skill's clip, turned by a random yaw and moved to the origin. An episode
 ends on a fall (a body other than the feet touches the ground), on a simulator blow-up (the
-batch resets that env and counts it) or at `episode_seconds` (truncation).
+batch resets that env and counts it), on a large pose error against the clip's timed reference
+(reward.pose_error_threshold) or at `episode_seconds` (truncation).
+
+The rules themselves (state parts, rewards, pose error, reference clock, episode ends, fall rates)
+are `rules.py` and `features.py`, shared with the on-device env (`env_torch.py`); this class keeps
+the per-env bookkeeping on numpy arrays: commands, resets, the reference, the random numbers.
 """
 
 from __future__ import annotations
