@@ -240,9 +240,8 @@ class CgailLearner(AgentCounters):
             "train/unstable_rate": float(ro.unstable) / n,
             "sim/unstable_resets": float(ro.unstable),
         }
-        if agent.conditional and hasattr(env, "fall_rate"):
-            stats.update({f"fall_rate/{sk.name}": float(r) for sk, r in zip(agent.skills, env.fall_rate)})
-        if agent.conditional:
+        if agent.conditional:  # both envs keep per-skill failure rates (env.skill_fall_weight)
+            stats.update({f"fall_rate/{sk.name}": float(r) for sk, r in zip(agent.skills, env.fall_rate.tolist())})
             stats["train/r_class"] = float(rew["r_class"].mean())
             stats.update(class_accuracy_on_policy(agent, ro, rew["probs"]))
         return stats
