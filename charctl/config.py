@@ -88,15 +88,21 @@ def compose_config(experiment: str, overrides: list[str] | None = None, schema: 
             f"bad override for {experiment} ({_first_line(exc)}); overrides: {' '.join(overrides)}"
         ) from None
     if schema is not None:
-        cfg = validate(cfg, schema, experiment)
+        given = frozenset(o.split("=", 1)[0].lstrip("+~") for o in overrides)
+        cfg = validate(cfg, schema, experiment, given=given)
         problem = check_device_available(str(cfg.get("device", "auto")))
         if problem:
             raise CharctlError(problem)
     return cfg
 
 
-def validate(cfg, schema: type, experiment: str):
-    """Merge `cfg` into `schema`; unknown keys and wrong types become one-line errors."""
+def validate(cfg, schema: type, experiment: str, given: frozenset[str] | None = None):
+    """Merge `cfg` into `schema`; unknown keys and wrong types become one-line errors.
+
+    A freshly composed config (`given` = the keys set on the command line) first has the keys that do not
+    apply to it (the schema's `inapplicable(cfg)`, e.g. a preset's per-skill style head in an AMP run)
+    reset to the schema's defaults, unless the command line set them; a recorded run's config
+    (`given` None) is taken as it is."""
     from omegaconf import OmegaConf
     from omegaconf.errors import ConfigKeyError, OmegaConfBaseException, ValidationError
 
@@ -112,6 +118,8 @@ def validate(cfg, schema: type, experiment: str):
     except OmegaConfBaseException as exc:
         raise CharctlError(f"invalid config for {experiment}: {_first_line(exc)}") from None
     OmegaConf.set_struct(merged, True)
+    if given is not None:
+        _reset_inapplicable(merged, schema, given)
     problem = check_fields(merged, schema) or check_device_name(merged.get("device", "auto"), schema, experiment)
     if problem:
         raise CharctlError(f"invalid config for {experiment}: {problem}")
@@ -121,6 +129,19 @@ def validate(cfg, schema: type, experiment: str):
         if problem:
             raise CharctlError(f"invalid config for {experiment}: {problem}")
     return merged
+
+
+def _reset_inapplicable(cfg, schema: type, given: frozenset[str]) -> None:
+    """Reset, in place, the keys `schema.inapplicable(cfg)` names to the schema's defaults, except those in `given`."""
+    from omegaconf import OmegaConf
+
+    inapplicable = getattr(schema, "inapplicable", None)
+    if not callable(inapplicable):
+        return
+    defaults = OmegaConf.structured(schema)
+    for key in inapplicable(cfg):
+        if key not in given:
+            OmegaConf.update(cfg, key, OmegaConf.select(defaults, key))
 
 
 def expand_multirun(overrides: list[str]) -> list[list[str]]:
@@ -234,7 +255,10 @@ def _force_schema_keys(overrides: list[str], schema: type | None) -> list[str]:
 
 
 def _check_override_syntax(overrides: list[str]) -> None:
+    """Each override is key=value, or ~key (Hydra's delete: the key falls back to the schema's default)."""
     for o in overrides:
+        if o.startswith("~") and len(o) > 1:
+            continue
         if "=" not in o or o.startswith("="):
             raise CharctlError(f"bad override {o!r}: overrides look like key=value (e.g. scale=smoke ppo.lr=1e-4)")
 

@@ -10,8 +10,13 @@ CGAIL_FP32 := ppo.update_precision=fp32
 # All shipped policies were trained before the small preset overlapped the rollout with the updates
 # (train.overlap_update=true): reproduce them with the loop in turn.
 CGAIL_INTURN := train.overlap_update=false
+# The paper's reward and termination at small scale: the small preset carries the fidelity recipe since
+# 2026-12-03 (conf/preset/cgail/small.yaml); `~key` deletes the preset's value, so the schema's (the paper's) applies.
+CGAIL_PAPER_RECIPE := ~disc.style_head ~disc.wrong_skill_fakes ~cgail.class_on_policy ~reward.w_style ~reward.w_class \
+	~reward.class_form ~reward.low_style_threshold ~reward.pose_error_threshold ~reward.w_track ~env.phase_obs \
+	~env.skill_fall_weight ~ppo.desired_kl ~ppo.lr_max
 # The settings repro-cgail-small trains with; repro-cgail-current empties it to train at the current preset.
-CGAIL_SHIPPED := $(CGAIL_300HZ) $(CGAIL_FP32) $(CGAIL_INTURN)
+CGAIL_SHIPPED := $(CGAIL_300HZ) $(CGAIL_FP32) $(CGAIL_INTURN) $(CGAIL_PAPER_RECIPE)
 
 # The policy `make demo` shows, and its command schedule (seconds): each skill held 4-5 s, so the kick
 # (a 1.5-s clip) is done after the 60-frame (2-s) command ramp ends.

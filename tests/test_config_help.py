@@ -36,7 +36,8 @@ def test_source_is_the_last_layer_that_sets_the_key():
 
 
 def test_explain_a_section_and_an_unknown_key():
-    text = explain("cgail", "reward", ["env.num_envs=8"], load("cgail").config_class())
+    # scale=smoke: the small preset sets the fidelity recipe's reward keys (tests/test_cgail_presets.py)
+    text = explain("cgail", "reward", ["scale=smoke", "env.num_envs=8"], load("cgail").config_class())
     assert "reward.pose_error_threshold: 0.0  (float; schema default 0.0; set by schema default)" in text
     assert "env.num_envs" not in text
     with pytest.raises(CharctlError, match="no config key 'rewards'"):
@@ -58,7 +59,7 @@ def test_explain_prints_the_declared_choices_and_range():
     assert ks["reward.kind"].choices == ("adversarial", "tracking") and ks["reward.kind"].type == "str"
     assert ks["ppo.gamma"].allowed() == ">= 0 and < 1" and ks["ppo.hidden"].allowed() == "each >= 1"
     assert ks["reward.w_track"].allowed() == ""  # nothing declared: no line
-    text = explain("cgail", "reward", [], schema)
+    text = explain("cgail", "reward", ["scale=smoke"], schema)  # smoke leaves the reward keys at the schema's
     assert "reward.kind: 'adversarial'  (str; schema default 'adversarial'; set by schema default)\n" in text
     assert "\n    allowed: one of adversarial, tracking\n" in text
     assert "reward.w_style: 0.5  (float; schema default 0.5; set by schema default)\n    allowed: >= 0\n" in text

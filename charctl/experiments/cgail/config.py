@@ -195,6 +195,21 @@ class Config(BaseConfig):
     train: TrainConfig = field(default_factory=TrainConfig)
 
     @staticmethod
+    def inapplicable(cfg) -> list[str]:
+        """Keys that do not apply to this run, reset to the schema's defaults when a config is composed unless
+        the command line sets them (`charctl.config.validate`), so the small preset's fidelity recipe leaves the
+        baselines as they are: the AMP baseline (cgail.conditional=false) has no command to pick a style logit
+        for, so no per-skill head and no wrong-skill fakes; the tracking baseline (reward.kind=tracking) has no
+        discriminator and its episodes end on a fall or at the clip's end only (docs/cgail.md, "Tracking
+        baseline"), so no low-style or pose-error termination and no extra tracking reward."""
+        keys = []
+        if not cfg.cgail.conditional:
+            keys += ["disc.style_head", "disc.wrong_skill_fakes"]
+        if cfg.reward.kind == "tracking":
+            keys += ["reward.low_style_threshold", "reward.pose_error_threshold", "reward.w_track"]
+        return keys
+
+    @staticmethod
     def check(cfg) -> str | None:
         """Cross-field checks; returns a message or None. validate has checked each field's declared
         choices and range (charctl.config_fields.check_fields) before; the choices are checked here again for
