@@ -73,3 +73,105 @@ def test_pose_key_error_broadcasts_over_clip_frames(arr):
 
 def test_state_width():
     assert rules.state_dim(False) == 243 and rules.state_dim(True) == 245
+
+
+# ---------------------------------------------------------------- per-env bookkeeping
+
+
+def _switch_example(arr):
+    """Five envs, commands B (`cmd`), A (`prev_cmd`), ramp weights w, reference states, the envs commanded
+    (`mask`) and their new commands."""
+    return dict(
+        cmd=arr([1, 2, 0, 3, 1]),
+        prev_cmd=arr([0, 1, 0, 2, 0]),
+        w=arr([0.75, 0.25, 1.0, 0.5, 0.5]),
+        ref_active=arr([True, True, True, True, False]),
+        mask=arr([True, True, True, True, False]),
+        new_cmd=arr([2, 0, 0, 1, 2]),
+    )
+
+
+@pytest.mark.parametrize("arr", LIBS)
+def test_switch_commands_by_hand(arr):
+    """Env 0: 1 -> 2 at w 0.75, B (1) dominates, so A = 1; env 1: 2 -> 0 at w 0.25, A (1) dominates, A = 1;
+    env 2: commanded to its own skill 0, unchanged; env 3: 3 -> 1 at w 0.5 (a tie goes to B), A = 3; env 4:
+    not in the mask, unchanged. The changed envs restart their ramp at w 0 and suspend their reference."""
+    cmd, prev_cmd, w, active, changed = rules.switch_commands(**_switch_example(arr), ramp_frames=4)
+    assert _np(changed).tolist() == [True, True, False, True, False]
+    assert _np(cmd).tolist() == [2, 0, 0, 1, 1]
+    assert _np(prev_cmd).tolist() == [1, 1, 0, 3, 0]
+    assert _np(w).tolist() == [0.0, 0.0, 1.0, 0.0, 0.5]
+    assert _np(active).tolist() == [False, False, True, False, False]
+
+
+@pytest.mark.parametrize("arr", LIBS)
+def test_switch_commands_without_a_ramp_switches_at_once(arr):
+    """ramp_frames 0: the changed envs (0, 1, 3) go to w = 1 at once; A is still the dominant old command."""
+    cmd, prev_cmd, w, active, changed = rules.switch_commands(**_switch_example(arr), ramp_frames=0)
+    assert _np(w).tolist() == [1.0, 1.0, 1.0, 1.0, 0.5]
+    assert _np(prev_cmd).tolist() == [1, 1, 0, 3, 0] and _np(cmd).tolist() == [2, 0, 0, 1, 1]
+    assert _np(active).tolist() == [False, False, True, False, False]
+
+
+def test_switch_commands_on_the_commanded_rows_equals_the_masked_form():
+    """The CPU env passes the rows it commands (ids 0, 1, 3) with an all-true mask, the device env all rows
+    with a mask: the same result on those rows."""
+    full = rules.switch_commands(**_switch_example(np.asarray), ramp_frames=4)
+    ids = np.array([0, 1, 3])
+    rows = {k: v[ids] for k, v in _switch_example(np.asarray).items()}
+    rows["mask"] = np.ones(3, dtype=bool)
+    for a, b in zip(rules.switch_commands(**rows, ramp_frames=4), full, strict=True):
+        assert a.tolist() == b[ids].tolist()
+
+
+@pytest.mark.parametrize("arr", LIBS)
+def test_advance_ramp_by_hand(arr):
+    """Ramp over 4 frames: w + 1/4, at most 1 (0.875 -> 1.125 -> 1); no ramp (0 frames): w = 1."""
+    w = arr([0.0, 0.5, 0.875, 1.0])
+    assert _np(rules.advance_ramp(w, 4)).tolist() == [0.25, 0.75, 1.0, 1.0]
+    assert _np(rules.advance_ramp(w, 0)).tolist() == [1.0, 1.0, 1.0, 1.0]
+
+
+@pytest.mark.parametrize("arr", LIBS)
+def test_restart_after_ramp_by_hand(arr):
+    """Env 0 waits for its ramp, which has ended (w 1): frame 0, 3 grace steps, reference on; env 1 waits,
+    ramp at 0.75: unchanged; envs 2 and 3 run their reference already (env 3 mid-ramp too): unchanged."""
+    frame, grace, active = rules.restart_after_ramp(
+        arr([7, 7, 7, 7]), arr([0, 1, 0, 2]), arr([False, False, True, True]), arr([1.0, 0.75, 1.0, 0.5]), 3
+    )
+    assert _np(frame).tolist() == [0, 7, 7, 7]
+    assert _np(grace).tolist() == [3, 1, 0, 2]
+    assert _np(active).tolist() == [True, False, True, True]
+
+
+@pytest.mark.parametrize("arr", LIBS)
+def test_count_down_grace_by_hand(arr):
+    """Grace 0 stays 0, 1 -> 0, 3 -> 2; a clip that has just restarted gets the full grace (5)."""
+    out = rules.count_down_grace(arr([0, 1, 3, 0]), arr([False, False, False, True]), 5)
+    assert _np(out).tolist() == [0, 0, 2, 5]
+
+
+@pytest.mark.parametrize("arr", LIBS)
+def test_pose_check_by_hand(arr):
+    """Threshold 0.5 m. Env 0: checked, 0.6 m -> ended; env 1: checked, 0.5 m is not above -> runs on;
+    env 2: reference off (a ramp); env 3: in grace; env 4: fell; env 5: blew up -- none of 2-5 checked."""
+    checked, ended = rules.pose_check(
+        arr([True, True, False, True, True, True]),
+        arr([0, 0, 0, 2, 0, 0]),
+        arr([False, False, False, False, True, False]),
+        arr([False, False, False, False, False, True]),
+        arr([0.6, 0.5, 0.9, 0.9, 0.9, 0.9]),
+        0.5,
+    )
+    assert _np(checked).tolist() == [True, True, False, False, False, False]
+    assert _np(ended).tolist() == [True, False, False, False, False, False]
+
+
+@pytest.mark.parametrize("arr", LIBS)
+def test_checked_tracking_reward_by_hand(arr):
+    """Env 0 matches its reference: 0.65 + 0.1 + 0.15 + 0.1 = 1; env 1 is 0.1 m higher at the root: the root
+    term is exp(-10 * 0.01), r = 0.9 + 0.1 exp(-0.1); env 2 matches but is unchecked: 0."""
+    obs, scored = np.zeros((3, 133)), np.zeros((3, 133))
+    obs[1, 0] = 0.1
+    out = rules.checked_tracking_reward(arr(obs), arr(scored), arr([True, True, False]))
+    np.testing.assert_allclose(_np(out), [1.0, 0.9 + 0.1 * math.exp(-0.1), 0.0], atol=1e-12)

@@ -8,9 +8,10 @@ ends on a fall (a body other than the feet touches the ground), on a simulator b
 batch resets that env and counts it), on a large pose error against the clip's timed reference
 (reward.pose_error_threshold) or at `episode_seconds` (truncation).
 
-The rules themselves (state parts, rewards, pose error, reference clock, episode ends, fall rates)
-are `rules.py` and `features.py`, shared with the on-device env (`env_torch.py`); this class keeps
-the per-env bookkeeping on numpy arrays: commands, resets, the reference, the random numbers.
+The rules themselves (state parts, rewards, pose error, reference clock, episode ends, fall rates,
+command switches, the ramp, the reference's restart and grace steps) are `rules.py` and `features.py`,
+shared with the on-device env (`env_torch.py`); this class holds the per-env arrays on numpy and
+applies them, and keeps the resets (by index) and the random numbers.
 """
 
 from __future__ import annotations
@@ -28,16 +29,22 @@ from charctl.experiments.cgail.features import (
     sim_kinematics,
 )
 from charctl.experiments.cgail.rules import (
+    advance_ramp,
     advance_reference,
+    checked_tracking_reward,
+    count_down_grace,
     episode_end,
     goal_features,
     goal_reward,
     phase_features,
+    pose_check,
     pose_key_error,
     pose_keys,
     reference_pose_error,
+    restart_after_ramp,
     skill_probabilities,
     state_dim,
+    switch_commands,
     tracking_reward,
     update_fall_rates,
 )
@@ -126,25 +133,18 @@ class CgailEnv:
         return c
 
     def set_command(self, ids: np.ndarray, skill: np.ndarray | int, ramp: bool = True) -> None:
-        """Switch envs `ids` to `skill`; with `ramp` the blend goes A -> B over ramp_frames."""
-        ids = np.asarray(ids)
+        """Switch envs `ids` (distinct) to `skill`; with `ramp` the blend goes A -> B over ramp_frames
+        (`rules.switch_commands` on those rows; new heading goals where the command changed)."""
+        ids = np.atleast_1d(np.asarray(ids))
         new = np.broadcast_to(np.asarray(skill), ids.shape)
-        changed = new != self.cmd[ids]
-        # the blend being left becomes the start of the new ramp: take its dominant command as A
-        dominant = np.where(self.w[ids] >= 0.5, self.cmd[ids], self.prev_cmd[ids])
-        self.prev_cmd[ids] = np.where(changed, dominant, self.prev_cmd[ids])
-        self.cmd[ids] = new
-        use_ramp = ramp and self.cfg.ramp_frames > 0
-        self.w[ids] = np.where(changed, 0.0 if use_ramp else 1.0, self.w[ids])
-        goal_ids = ids[changed]
-        self.ref_active[goal_ids] = False  # the new clip's reference starts once the ramp has ended
-        self._new_goal(goal_ids)
+        rows = (self.cmd[ids], self.prev_cmd[ids], self.w[ids], self.ref_active[ids])
+        frames = self.cfg.ramp_frames if ramp else 0
+        *rows, changed = switch_commands(*rows, np.ones(ids.shape, dtype=bool), new, frames)
+        self.cmd[ids], self.prev_cmd[ids], self.w[ids], self.ref_active[ids] = rows
+        self._new_goal(ids[changed])
 
     def _advance_ramp(self) -> None:
-        if self.cfg.ramp_frames > 0:
-            self.w = np.minimum(1.0, self.w + 1.0 / self.cfg.ramp_frames)
-        else:
-            self.w[:] = 1.0
+        self.w = advance_ramp(self.w, self.cfg.ramp_frames)
 
     def _new_goal(self, ids: np.ndarray) -> None:
         if len(ids) == 0:
@@ -220,7 +220,7 @@ class CgailEnv:
             self.ref_frame, self.clip_loops[cmd], self.clip_frames[cmd], restart
         )
         if restart:
-            self.ref_grace = np.where(again, self.pose_grace, np.maximum(self.ref_grace - 1, 0))
+            self.ref_grace = count_down_grace(self.ref_grace, again, self.pose_grace)
         return self._reference_obs(), ended
 
     def _reference_obs(self, frames: np.ndarray | None = None) -> np.ndarray:
@@ -249,10 +249,9 @@ class CgailEnv:
 
     def _restart_reference_after_ramp(self) -> None:
         """Envs whose command ramp has just finished: the new clip's reference starts at frame 0."""
-        start = ~self.ref_active & (self.w >= 1.0)
-        self.ref_frame[start] = 0
-        self.ref_grace[start] = self.pose_grace
-        self.ref_active |= start
+        self.ref_frame, self.ref_grace, self.ref_active = restart_after_ramp(
+            self.ref_frame, self.ref_grace, self.ref_active, self.w, self.pose_grace
+        )
 
     @property
     def state(self) -> np.ndarray:
@@ -284,11 +283,10 @@ class CgailEnv:
         fell = self.sim.non_foot_ground_contact(self.cfg.fall_tolerance)
         pose_ended = np.zeros(self.N, dtype=bool)
         if self.pose_threshold > 0:
-            checked = self.ref_active & (self.ref_grace == 0) & ~(fell | unstable)
             err, scored = self._pose_error(pair_next, ref)
-            pose_ended = checked & (err > self.pose_threshold)
+            checked, pose_ended = pose_check(self.ref_active, self.ref_grace, fell, unstable, err, self.pose_threshold)
             if self.reference_reward:  # reward.w_track: the tracking reward where the reference is checked
-                r_track = np.where(checked, tracking_reward(pair_next, scored), 0.0)
+                r_track = checked_tracking_reward(pair_next, scored, checked)
         self.steps += 1
         terminated, truncated = episode_end(fell, unstable, pose_ended, self.steps, self.max_steps, clip_ended)
         self.fall_count += int(fell.sum())

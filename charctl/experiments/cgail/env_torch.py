@@ -33,16 +33,22 @@ from charctl.experiments.cgail.features import (
     policy_state,
 )
 from charctl.experiments.cgail.rules import (
+    advance_ramp,
     advance_reference,
+    checked_tracking_reward,
+    count_down_grace,
     episode_end,
     goal_features,
     goal_reward,
     phase_features,
+    pose_check,
     pose_key_error,
     pose_keys,
     reference_pose_error,
+    restart_after_ramp,
     skill_probabilities,
     state_dim,
+    switch_commands,
     tracking_reward,
     update_fall_rates,
 )
@@ -170,23 +176,17 @@ class CgailDeviceEnv:
 
     def set_command(self, mask, skill, ramp: bool = True) -> None:
         """Switch the envs in `mask` ((N,) bool, or integer ids) to `skill` ((N,) or scalar); with `ramp`
-        the blend goes A -> B over ramp_frames."""
+        the blend goes A -> B over ramp_frames (`rules.switch_commands`; new heading goals where it changed)."""
         mask = self.sim.as_mask(mask)
         new = torch.as_tensor(skill, dtype=torch.long, device=self.device).expand(self.N)
-        changed = mask & (new != self.cmd)
-        dominant = torch.where(self.w >= 0.5, self.cmd, self.prev_cmd)
-        self.prev_cmd = torch.where(changed, dominant, self.prev_cmd)
-        self.cmd = torch.where(mask, new, self.cmd)
-        start = 0.0 if (ramp and self.cfg.ramp_frames > 0) else 1.0
-        self.w = torch.where(changed, torch.full_like(self.w, start), self.w)
-        self.ref_active = self.ref_active & ~changed  # the new clip's reference starts once the ramp has ended
+        frames = self.cfg.ramp_frames if ramp else 0
+        self.cmd, self.prev_cmd, self.w, self.ref_active, changed = switch_commands(
+            self.cmd, self.prev_cmd, self.w, self.ref_active, mask, new, frames
+        )
         self._new_goal(changed, self.sim.body_quat_xyzw[:, 0])
 
     def _advance_ramp(self) -> None:
-        if self.cfg.ramp_frames > 0:
-            self.w = torch.clamp(self.w + 1.0 / self.cfg.ramp_frames, max=1.0)
-        else:
-            self.w = torch.ones_like(self.w)
+        self.w = advance_ramp(self.w, self.cfg.ramp_frames)
 
     def _new_goal(self, mask: torch.Tensor, root_rot: torch.Tensor) -> None:
         spread = math.radians(self.cfg.goal_max_angle_deg)
@@ -250,8 +250,7 @@ class CgailDeviceEnv:
             self.ref_frame, self.clip_loops[cmd], self.clip_frames[cmd], restart
         )
         if restart:
-            grace = torch.clamp(self.ref_grace - 1, min=0)
-            self.ref_grace = torch.where(again, torch.full_like(grace, self.pose_grace), grace)
+            self.ref_grace = count_down_grace(self.ref_grace, again, self.pose_grace)
         return self.ref_obs[cmd, self.ref_frame], ended
 
     def _pose_error(self, obs: torch.Tensor, ref: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
@@ -266,10 +265,9 @@ class CgailDeviceEnv:
 
     def _restart_reference_after_ramp(self) -> None:
         """Envs whose command ramp has just finished: the new clip's reference starts at frame 0."""
-        start = ~self.ref_active & (self.w >= 1.0)
-        self.ref_frame = torch.where(start, torch.zeros_like(self.ref_frame), self.ref_frame)
-        self.ref_grace = torch.where(start, torch.full_like(self.ref_grace, self.pose_grace), self.ref_grace)
-        self.ref_active = self.ref_active | start
+        self.ref_frame, self.ref_grace, self.ref_active = restart_after_ramp(
+            self.ref_frame, self.ref_grace, self.ref_active, self.w, self.pose_grace
+        )
 
     @property
     def state(self) -> torch.Tensor:
@@ -305,11 +303,10 @@ class CgailDeviceEnv:
         fell = self.sim.non_foot_ground_contact(self.cfg.fall_tolerance)
         pose_ended = no_pose_end
         if self.pose_threshold > 0:
-            checked = self.ref_active & (self.ref_grace == 0) & ~(fell | unstable)
             err, scored = self._pose_error(pair_next, ref)
-            pose_ended = checked & (err > self.pose_threshold)
+            checked, pose_ended = pose_check(self.ref_active, self.ref_grace, fell, unstable, err, self.pose_threshold)
             if self.reference_reward:  # reward.w_track: the tracking reward where the reference is checked
-                r_track = torch.where(checked, tracking_reward(pair_next, scored), zeros)
+                r_track = checked_tracking_reward(pair_next, scored, checked)
         self.steps = self.steps + 1
         terminated, truncated = episode_end(fell, unstable, pose_ended, self.steps, self.max_steps, clip_ended)
         self._falls += fell.sum()

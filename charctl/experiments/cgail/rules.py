@@ -1,9 +1,11 @@
 """The cgail environment's rules, written once for both backends (numpy on the CPU, torch on the device).
 
 Pure functions of batched arrays (leading dim N): the heading-goal and clip-phase parts of the policy
-state, the DeepMimic-style tracking reward, the reference pose error, the heading-goal reward and the
-episode ends. `env.CgailEnv` calls them with numpy arrays, `env_torch.CgailDeviceEnv` and the web
-graph with torch tensors (`charctl.motion.array_compat`), so a rule change is one edit.
+state, the DeepMimic-style tracking reward, the reference pose error, the heading-goal reward, the
+episode ends, and the per-env bookkeeping (command switches and the ramp weight, the timed reference's
+restart and grace steps, the pose-error check). `env.CgailEnv` calls them with numpy arrays,
+`env_torch.CgailDeviceEnv` and the web graph with torch tensors (`charctl.motion.array_compat`), so a
+rule change is one edit.
 
 Frames and units (docs/cgail.md): the disc observation o (133) is in the heading frame (+x facing, y up,
 +z right), metres, m/s, radians; yaw angles are about world +y.
@@ -166,3 +168,83 @@ def skill_probabilities(rates: Array, fall_weight: float, floor: float = 1e-3) -
     xp = namespace(rates)
     w = rates + floor
     return (1.0 - fall_weight) / rates.shape[0] + fall_weight * w / xp.sum(w)
+
+
+# ---------------------------------------------------------------- per-env bookkeeping
+# Commands (eq 4.10: c̄ = (1 - w) c_A + w c_B), the ramp weight w and the timed reference of the pose-error
+# check (reward.pose_error_threshold, env.phase_obs): per-env arrays (N,) updated by masks, so the CPU env
+# can pass the rows it touches and the device env all N rows with a mask.
+
+
+def switch_commands(
+    cmd: Array, prev_cmd: Array, w: Array, ref_active: Array, mask: Array, new_cmd: Array, ramp_frames: int
+) -> tuple[Array, Array, Array, Array, Array]:
+    """Command the envs in `mask` ((N,) bool) to `new_cmd` ((N,) skill index): (cmd, prev_cmd, w, ref_active,
+    changed), all (N,).
+
+    `cmd` B, `prev_cmd` A, `w` the ramp weight in [0, 1] and `ref_active` whether the timed reference is
+    checked. An env whose command changes (`changed`: in `mask` and `new_cmd` != `cmd`) takes the dominant
+    command of the blend it leaves (B where w >= 0.5, else A) as its new A, restarts its ramp at w = 0 (w = 1
+    at once when `ramp_frames` is 0: no ramp) and suspends its reference until the ramp has ended
+    (`restart_after_ramp`). An env in `mask` commanded to its current skill keeps A, w and its reference.
+    The caller draws new heading goals where `changed`."""
+    xp = namespace(cmd, prev_cmd, w)
+    changed = mask & (new_cmd != cmd)
+    dominant = xp.where(w >= 0.5, cmd, prev_cmd)
+    start = 0.0 if ramp_frames > 0 else 1.0
+    return (
+        xp.where(mask, new_cmd, cmd),
+        xp.where(changed, dominant, prev_cmd),
+        xp.where(changed, xp.full_like(w, start), w),
+        ref_active & ~changed,
+        changed,
+    )
+
+
+def advance_ramp(w: Array, ramp_frames: int) -> Array:
+    """(N,) the ramp weight one control step on: w + 1/ramp_frames, at most 1 (eq 4.10's linear ramp over
+    `ramp_frames` control frames); 1 everywhere when `ramp_frames` is 0."""
+    xp = namespace(w)
+    if ramp_frames > 0:
+        return xp.minimum(w + 1.0 / ramp_frames, xp.ones_like(w))
+    return xp.ones_like(w)
+
+
+def restart_after_ramp(
+    ref_frame: Array, ref_grace: Array, ref_active: Array, w: Array, grace: int
+) -> tuple[Array, Array, Array]:
+    """(ref_frame, ref_grace, ref_active), all (N,): envs whose reference waits for a command ramp
+    (`ref_active` false) and whose ramp has ended (`w` >= 1) start the new clip's reference at frame 0,
+    unchecked for `grace` control steps; the others keep theirs."""
+    xp = namespace(ref_frame, ref_grace, w)
+    start = ~ref_active & (w >= 1.0)
+    return (
+        xp.where(start, xp.zeros_like(ref_frame), ref_frame),
+        xp.where(start, xp.full_like(ref_grace, grace), ref_grace),
+        ref_active | start,
+    )
+
+
+def count_down_grace(ref_grace: Array, restarted: Array, grace: int) -> Array:
+    """(N,) control steps left without a pose-error check after one step of the timed reference: `grace` where
+    the clip has just restarted at frame 0 (`restarted`, from `advance_reference`), else one fewer (not below 0)."""
+    xp = namespace(ref_grace, restarted)
+    return xp.where(restarted, xp.full_like(ref_grace, grace), xp.maximum(ref_grace - 1, xp.zeros_like(ref_grace)))
+
+
+def pose_check(
+    ref_active: Array, ref_grace: Array, fell: Array, unstable: Array, err: Array, threshold: float
+) -> tuple[Array, Array]:
+    """(checked, pose_ended) bool (N,): the pose error `err` (N,) m counts where the reference is running
+    (`ref_active`), out of its grace steps (`ref_grace` == 0) and the step neither fell nor blew up
+    (`checked`); there, an error above `threshold` m ends the episode (`pose_ended`)."""
+    checked = ref_active & (ref_grace == 0) & ~(fell | unstable)
+    return checked, checked & (err > threshold)
+
+
+def checked_tracking_reward(obs: Array, scored: Array, checked: Array) -> Array:
+    """(N,) reward.w_track's reward: `tracking_reward` of the disc observations `obs` (N, 133) against the
+    references the pose error scored them against (`scored` (N, 133)) where `checked` (`pose_check`), else 0."""
+    xp = namespace(obs, scored)
+    r = tracking_reward(obs, scored)
+    return xp.where(checked, r, xp.zeros_like(r))
