@@ -144,6 +144,46 @@ def _reset_inapplicable(cfg, schema: type, given: frozenset[str]) -> None:
             OmegaConf.update(cfg, key, OmegaConf.select(defaults, key))
 
 
+ANY_VALUE = object()  # a removed key whose every value behaves as the code that remains (RemovedKeys.neutral)
+
+
+@dataclass(frozen=True)
+class RemovedKeys:
+    """Keys a schema no longer has, so that the config.yaml of a run recorded before still opens
+    (`drop_removed_keys`): a schema lists them as its class attribute `REMOVED`."""
+
+    date: str  # when they were removed
+    commit: str  # the last commit that had them: a run that used one is evaluated with charctl there
+    neutral: dict[str, Any]  # dotted key -> its value that behaves as the code that remains (or ANY_VALUE)
+
+
+def drop_removed_keys(cfg, schema: type, source: str | Path) -> None:
+    """Delete, in place, from a recorded run's config the keys `schema.REMOVED` lists when they hold their
+    neutral value (the run behaves as the code that remains). A run that set one to anything else cannot
+    be rebuilt by this code: a one-line error naming the commit that still can. `source`: the run's folder,
+    for the message. Called where a recorded run is opened (charctl.runs.open_run)."""
+    from omegaconf import OmegaConf
+
+    removed: RemovedKeys | None = getattr(schema, "REMOVED", None)
+    if removed is None:
+        return
+    used = []
+    for key, neutral in removed.neutral.items():
+        section, _, leaf = key.rpartition(".")
+        node = OmegaConf.select(cfg, section) if section else cfg
+        if not OmegaConf.is_dict(node) or leaf not in node:
+            continue
+        value = node[leaf]
+        if neutral is not ANY_VALUE and value != neutral:
+            used.append(f"{key}={str(value).lower() if isinstance(value, bool) else value}")
+        del node[leaf]
+    if used:
+        raise CharctlError(
+            f"{source}: this run used {', '.join(used)}, removed on {removed.date}; "
+            f"evaluate it with charctl at commit {removed.commit}"
+        )
+
+
 def expand_multirun(overrides: list[str]) -> list[list[str]]:
     """Expand Hydra sweep syntax (`a=1,2 b=range(3)`) into the cartesian product of override lists."""
     from hydra.core.override_parser.overrides_parser import OverridesParser

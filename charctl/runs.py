@@ -193,11 +193,13 @@ def open_run(run_dir: str | Path, schema: type | None = None, overrides: list[st
     """Re-open an existing run (for --resume or evaluation), validating its config against `schema`."""
     from omegaconf import OmegaConf
 
-    from charctl.config import validate
+    from charctl.config import drop_removed_keys, validate
 
     run_dir = Path(run_dir)
     cfg = read_run_config(run_dir)
     experiment = str(cfg.get("experiment"))
+    if schema is not None:  # keys the schema has dropped since the run was recorded (its REMOVED table)
+        drop_removed_keys(cfg, schema, run_dir)
     remove_stale_temp_files(run_dir)
     if overrides:
         from charctl.config import _check_override_syntax

@@ -23,23 +23,7 @@ CGAIL_SHIPPED := $(CGAIL_300HZ) $(CGAIL_FP32) $(CGAIL_INTURN) $(CGAIL_PAPER_RECI
 CGAIL_DEMO_POLICY := pretrained/cgail-3skill-fidelity
 CGAIL_DEMO_SCHEDULE := walk:0,run:4,right_kick:8
 
-.PHONY: repro-cgail-small repro-cgail-current repro-cgail-10skill repro-cgail-10skill-temperature repro-cgail-10skill-kl repro-cgail-paper demo-cgail
-
-repro-cgail-10skill: install ## cgail: the shipped ten-skill run (pretrained/README.md; ~2.3 h on 2 cores), every kept checkpoint evaluated, one picked
-	$(CHARCTL) train cgail scale=small "use_skills=[]" reward.class_form=logratio env.skill_fall_weight=0.5 train.total_samples=50000000 train.checkpoint_every=20 train.keep_checkpoint_every=2500000 $(CGAIL_INTURN) seed=1 output_root=$(CGAIL_SMALL)/ten
-	C=$$(ls -d $(CGAIL_SMALL)/ten/cgail/*/ | tail -1); \
-	$(CHARCTL) eval $$C --checkpoints --rank margin --after 10000000
-
-repro-cgail-10skill-temperature: install ## cgail: the third ten-skill run, with a learned class temperature (pretrained/cgail-10skill-temperature; ~2 h on 2 cores), every kept checkpoint evaluated
-	$(CHARCTL) train cgail scale=small "use_skills=[]" reward.class_form=logratio env.skill_fall_weight=0.5 disc.learn_class_scale=true train.total_samples=45000000 train.checkpoint_every=20 train.keep_checkpoint_every=2500000 $(CGAIL_INTURN) seed=1 output_root=$(CGAIL_SMALL)/ten-temperature
-	C=$$(ls -d $(CGAIL_SMALL)/ten-temperature/cgail/*/ | tail -1); \
-	$(CHARCTL) eval $$C --checkpoints --rank margin --after 15000000
-
-repro-cgail-10skill-kl: install ## cgail: the fifth ten-skill run, KL-targeting learning rate (pretrained/cgail-10skill-kl; ~2 h on 2 cores): to 13,189,120 samples in turn, then resumed with the overlapped loop, as it was run; every kept checkpoint evaluated
-	$(CHARCTL) train cgail scale=small "use_skills=[]" reward.class_form=logratio disc.learn_class_scale=true ppo.desired_kl=0.02 ppo.lr_max=1e-4 train.total_samples=13189120 train.checkpoint_every=20 train.keep_checkpoint_every=2500000 $(CGAIL_INTURN) seed=1 output_root=$(CGAIL_SMALL)/ten-kl
-	C=$$(ls -d $(CGAIL_SMALL)/ten-kl/cgail/*/ | tail -1); \
-	$(CHARCTL) train cgail --resume $$C train.total_samples=40000000 train.overlap_update=true && \
-	$(CHARCTL) eval $$C --checkpoints --rank margin --after 15000000
+.PHONY: repro-cgail-small repro-cgail-current repro-cgail-paper demo-cgail
 
 # The fidelity recipe's 3-skill runs (docs/cgail.md, "Fidelity recipe"): A = per-skill style head, wrong-skill
 # fakes, class head on demonstrations only (w_S 0.8, w_C 0.2, r_C = P(command)), KL-targeting PPO rate; B = A's

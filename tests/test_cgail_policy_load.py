@@ -9,6 +9,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
+import pytest
 import torch
 
 from conftest import cli_env
@@ -69,3 +70,58 @@ def test_inference_agent_loads_the_networks_of_a_training_agent():
     assert (tr.agent.iteration, tr.agent.samples) == (full.iteration, full.samples)
     env = tr.make_env(4, seed=0)
     np.testing.assert_array_equal(tr.mean_action(env), TrainedRun(folder, tr.cfg, full).mean_action(env))
+
+
+def _recorded_run(tmp_path: Path, section: str = "", key: str = "", value=None) -> Path:
+    """A copy of pretrained/cgail-3skill-fidelity's config.yaml (which lists every key removed on 2026-12-03
+    at its neutral value) in a run folder of its own, with `section.key` set to `value` when given."""
+    import yaml
+
+    cfg = yaml.safe_load((PRETRAINED / "cgail-3skill-fidelity" / "config.yaml").read_text())
+    if key:
+        cfg[section][key] = value
+    run = tmp_path / "run"
+    run.mkdir()
+    (run / "config.yaml").write_text(yaml.safe_dump(cfg, sort_keys=False))
+    return run
+
+
+def test_a_recorded_config_with_the_removed_keys_at_their_neutral_values_opens(tmp_path):
+    """The removed knobs at the values that behave as the code that remains are dropped when the run is opened
+    (its config.yaml is left as it was); env.curriculum_samples has no effect with the curriculum off, so any
+    value of it is dropped."""
+    import yaml
+    from omegaconf import OmegaConf
+
+    from charctl.experiments.cgail.config import REMOVED_KEYS, Config
+    from charctl.runs import open_run
+
+    run = _recorded_run(tmp_path, "env", "curriculum_samples", 500_000)
+    before = (run / "config.yaml").read_text()
+    recorded = yaml.safe_load(before)
+    for key in REMOVED_KEYS:  # the recorded config lists every removed key
+        section, leaf = key.split(".")
+        assert leaf in recorded[section]
+        del recorded[section][leaf]
+    cfg = open_run(run, Config).cfg
+    assert OmegaConf.to_container(cfg) == recorded  # every other recorded value as it was
+    assert (run / "config.yaml").read_text() == before
+
+
+@pytest.mark.parametrize(
+    "section, key, value, shown",
+    [
+        ("disc", "learn_class_scale", True, "disc.learn_class_scale=true"),
+        ("disc", "objective", "bce", "disc.objective=bce"),
+        ("disc", "logit_reg", 0.05, "disc.logit_reg=0.05"),
+        ("disc", "demo_oversample", 4, "disc.demo_oversample=4"),
+        ("env", "curriculum_start_seconds", 0.5, "env.curriculum_start_seconds=0.5"),
+    ],
+)
+def test_a_run_that_used_a_removed_option_is_refused_in_one_line(tmp_path, section, key, value, shown):
+    from conftest import assert_one_line_error, charctl_in_process
+
+    run = _recorded_run(tmp_path, section, key, value)
+    res = charctl_in_process("eval", str(run), "--survival", "1", "-k", "1", cwd=tmp_path)
+    line = assert_one_line_error(res, f"this run used {shown}, removed on 2026-12-03", "at commit 8641215")
+    assert str(run) in line

@@ -185,14 +185,14 @@ def test_low_style_termination_counts_consecutive_low_steps_and_restarts_on_done
     from charctl.experiments.cgail.termination import LowStyleTermination
 
     disc = Discriminator(6, 2, [8], style_head="per_skill")
-    term = LowStyleTermination(disc, num_envs=3, threshold=0.999, steps=3, objective="lsgan")
+    term = LowStyleTermination(disc, num_envs=3, threshold=0.999, steps=3)
     pairs, cond = torch.randn(3, 6), torch.eye(2)[[0, 1, 0]]
     no = torch.zeros(3, dtype=torch.bool)
     assert not term.update(pairs, cond, no).any()
     assert not term.update(pairs, cond, torch.tensor([True, False, False])).any()  # env 0 restarts
     assert term.update(pairs, cond, no).tolist() == [False, True, True]  # envs 1, 2: third low step
     assert term.low.tolist() == [1, 0, 0]  # env 0: counted again from its restart
-    never = LowStyleTermination(disc, num_envs=3, threshold=1e-9, steps=1, objective="lsgan")
+    never = LowStyleTermination(disc, num_envs=3, threshold=1e-9, steps=1)
     d, _ = never.disc(pairs, cond=cond)
     ended = never.update(pairs, cond, no)
     assert ended.tolist() == (style_reward_of(d) < 1e-9).tolist()
@@ -201,7 +201,7 @@ def test_low_style_termination_counts_consecutive_low_steps_and_restarts_on_done
 def style_reward_of(d):
     from charctl.experiments.cgail.discriminator import style_reward
 
-    return style_reward(d, "lsgan")
+    return style_reward(d)
 
 
 def test_learner_with_low_style_termination_ends_episodes_and_logs_them():

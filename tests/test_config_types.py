@@ -110,7 +110,6 @@ CHOICES = [
     ("cgail", "env.backend", "cpu, warp, auto"),
     ("cgail", "reward.class_form", "l1, prob, logratio"),
     ("cgail", "reward.kind", "adversarial, tracking"),
-    ("cgail", "disc.objective", "lsgan, bce"),
     ("cgail", "disc.style_head", "shared, per_skill"),
     ("cgail", "cgail.class_loss", "ce, ls"),
     ("cgail", "ppo.update_precision", "fp32, bf16, auto"),

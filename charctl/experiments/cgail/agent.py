@@ -76,7 +76,7 @@ def build_agent(cfg, device: str = "cpu", training: bool = True) -> Agent:
     from charctl.experiments.cgail.rules import state_dim as policy_state_width
 
     torch.manual_seed(cfg.seed)
-    skills = load_skills(select_skills(cfg), cfg.env.control_hz, cfg.disc.demo_oversample)
+    skills = load_skills(select_skills(cfg), cfg.env.control_hz)
     K = len(skills)
     conditional = bool(cfg.cgail.conditional)
     state_dim = policy_state_width(cfg.reward.kind == "tracking" or cfg.env.phase_obs)
@@ -108,20 +108,14 @@ def _discriminator(cfg, pair_dim: int, num_skills: int) -> Discriminator:
         num_skills,
         list(cfg.disc.hidden),
         conditional=bool(cfg.cgail.conditional),
-        learn_class_scale=cfg.disc.learn_class_scale,
         style_head=cfg.disc.style_head,
     )
 
 
 def discriminator_param_groups(disc: Discriminator, dcfg) -> list[dict]:
-    """Adam parameter groups: the class head (and its learned temperature) at `class_lr` (when set),
-    everything else at `lr`."""
-
-    def in_class_head(name: str) -> bool:
-        return name.startswith("class_head.") or name == "class_log_scale"
-
-    head = [p for n, p in disc.named_parameters() if in_class_head(n)]
-    rest = [p for n, p in disc.named_parameters() if not in_class_head(n)]
+    """Adam parameter groups: the class head at `class_lr` (when set), everything else at `lr`."""
+    head = [p for n, p in disc.named_parameters() if n.startswith("class_head.")]
+    rest = [p for n, p in disc.named_parameters() if not n.startswith("class_head.")]
     groups = [{"params": rest, "lr": dcfg.lr}]
     if head:
         groups.append({"params": head, "lr": dcfg.class_lr if dcfg.class_lr > 0 else dcfg.lr})

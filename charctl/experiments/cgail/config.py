@@ -7,7 +7,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Annotated, Literal
 
-from charctl.config import BaseConfig
+from charctl.config import ANY_VALUE, BaseConfig, RemovedKeys
 from charctl.config_fields import check_fields, ranged
 from charctl.rl.config import PPOConfig, check_ppo
 from charctl.sim import CONTROL_HZ, JOINT_ARMATURE, PHYSICS_HZ
@@ -60,11 +60,6 @@ class EnvConfig:
     armature: float = ranged(JOINT_ARMATURE, gt=0)
     control_hz: float = ranged(CONTROL_HZ, gt=0)  # policy rate, charctl.sim.CONTROL_HZ (DeepMimic and the paper: 30 Hz)
     episode_seconds: float = ranged(10.0, gt=0)  # truncation length of an episode
-    # Episode-length curriculum (DeepMimic's 0.5 s -> 20 s): training episodes are truncated at
-    # curriculum_start_seconds at first, the limit growing linearly to episode_seconds over
-    # curriculum_samples samples. 0 = off (every episode may last episode_seconds). docs/cgail.md, "Ablation".
-    curriculum_start_seconds: float = 0.0
-    curriculum_samples: int = 2_000_000  # samples over which the episode limit grows to episode_seconds
     # eq 4.10-4.11: linear command ramp length (control frames); 0 = switch in one frame
     ramp_frames: int = ranged(60, ge=0)
     # per control step, probability of re-sampling the command within an episode
@@ -129,16 +124,7 @@ class DiscConfig:
     steps_per_iter: int = ranged(10, ge=1)  # discriminator gradient steps per PPO iteration
     replay_size: int = ranged(100_000, ge=1)  # policy-pair replay buffer
     replay_fraction: float = ranged(0.5, ge=0, le=1)  # share of the policy half drawn from the replay buffer
-    # lsgan (eqs 4.4/4.7, the paper) | bce (-log(1 - sigmoid D) reward, AMP's GPU peers)
-    objective: Annotated[str, Literal["lsgan", "bce"]] = "lsgan"
-    logit_reg: float = ranged(0.0, ge=0)  # weight of sum(w^2) of the style head's weights (AMP: 0.01-0.05)
-    weight_decay: float = ranged(0.0, ge=0)  # weight of sum(w^2) of every disc weight (AMP: 1e-4 - 5e-4)
     class_lr: float = ranged(0.0, ge=0)  # Adam lr of the class head; 0 = the same as `lr`
-    # Learned temperature of the class logits (exp(s), s trained at class_lr): spectral norm caps how confident
-    # the classifier can get; false = the paper's plain spectral-normalised head. docs/cgail.md, "Ten skills".
-    learn_class_scale: bool = False
-    # demonstration pairs at clip times on a 1/(control_hz*k) grid; 1 = frames only
-    demo_oversample: int = ranged(1, ge=1)
     # Style head: shared (the paper: one score D for every skill) | per_skill (one style logit per skill from the
     # shared trunk, the command's own used for policy pairs and the clip's for data: C-ASE / CALM). Needs
     # cgail.conditional. docs/cgail.md, "Fidelity recipe".
@@ -182,8 +168,25 @@ class TrainConfig:
     fidelity_every: int = 2_000_000
 
 
+# The knobs whose ablations lost, removed on 2026-12-03 with their code (docs/cgail.md keeps their rows and
+# results), each with the value that behaves as the code that remains. A recorded run's config.yaml
+# (pretrained/, outputs/) still lists them: opening the run drops those at that value and refuses a run that
+# used the option (charctl.config.drop_removed_keys); commit 8641215 still has them.
+REMOVED_KEYS: dict[str, object] = {
+    "disc.objective": "lsgan",  # the paper's LSGAN; "bce" was the BCE loss and -log(1 - sigmoid D) reward
+    "disc.logit_reg": 0.0,  # weight of the style head's sum(w^2)
+    "disc.weight_decay": 0.0,  # weight of every discriminator weight's sum(w^2)
+    "disc.learn_class_scale": False,  # a learned temperature of the class logits
+    "disc.demo_oversample": 1,  # demonstration pairs on a 1/(control_hz*k) grid
+    "env.curriculum_start_seconds": 0.0,  # the episode-length curriculum, off
+    "env.curriculum_samples": ANY_VALUE,  # its length in samples: no effect with the curriculum off
+}
+
+
 @dataclass
 class Config(BaseConfig):
+    REMOVED = RemovedKeys("2026-12-03", "8641215", REMOVED_KEYS)  # not a field: charctl.config.drop_removed_keys
+
     experiment: str = "cgail"
     skills: list[SkillConfig] = field(default_factory=paper_skills)  # the commandable skills: name, clip, heading goal
     use_skills: list[str] = field(default_factory=list)  # subset of skill names to train (empty = all), e.g. [walk]
@@ -269,18 +272,11 @@ def _check_disc(cfg) -> str | None:
 
 
 def _check_env(cfg) -> str | None:
-    """Physics and control rates, the episode curriculum, fall-weighted commands and the ramp."""
+    """Physics and control rates and fall-weighted commands."""
     env = cfg.env
     ratio = env.physics_hz / env.control_hz
     if abs(ratio - round(ratio)) > 1e-6:
         return f"env.physics_hz ({env.physics_hz}) must be a multiple of env.control_hz ({env.control_hz})"
-    if not 0.0 <= env.curriculum_start_seconds <= env.episode_seconds:
-        return (
-            f"env.curriculum_start_seconds ({env.curriculum_start_seconds}) must lie in "
-            f"[0, env.episode_seconds ({env.episode_seconds})]"
-        )
-    if env.curriculum_samples < 1:
-        return "env.curriculum_samples must be >= 1"
     if not 0.0 <= env.skill_fall_weight <= 1.0:
         return f"env.skill_fall_weight must lie in [0, 1], got {env.skill_fall_weight}"
     if env.skill_fall_halflife <= 0:

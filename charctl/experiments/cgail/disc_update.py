@@ -13,9 +13,7 @@ from charctl.experiments.cgail.agent import Agent
 from charctl.experiments.cgail.discriminator import (
     class_loss,
     gradient_penalty,
-    logit_regulariser,
     style_loss,
-    weight_decay_term,
     wrong_skill_labels,
 )
 from charctl.experiments.cgail.rollout import Rollout
@@ -90,13 +88,9 @@ def _discriminator_losses(
         wrong = wrong_skill_labels(labels[:n_wrong], K, agent.generator)
         d_wrong, _ = agent.disc(demo_n[:n_wrong], normalized=True, cond=F.one_hot(wrong, K).float())
         d_fake = torch.cat([d_pol, d_wrong])
-    l_style = style_loss(d_data, d_fake, cfg.objective)
+    l_style = style_loss(d_data, d_fake)
     l_gp = gradient_penalty(agent.disc, demo_n, cfg.w_gp, cond=demo_onehot)
     loss = l_style + l_gp
-    if cfg.logit_reg > 0:
-        loss = loss + cfg.logit_reg * logit_regulariser(agent.disc)
-    if cfg.weight_decay > 0:
-        loss = loss + cfg.weight_decay * weight_decay_term(agent.disc)
     l_cls = torch.zeros((), device=demo.device)
     if agent.conditional:
         kind = agent.cfg.cgail.class_loss
@@ -128,8 +122,6 @@ def _step_statistics(
         step_stats["train/class_acc_data"] = float(hit.mean())
         # mean probability of the clip's own label on data pairs: the data-side Fig 6.8 diagonal
         step_stats["train/class_prob_data"] = float(c_data.softmax(-1).gather(-1, labels[:, None]).mean())
-        if agent.disc.class_log_scale is not None:
-            step_stats["train/class_scale"] = float(agent.disc.class_log_scale.exp())
         for k, sk in enumerate(agent.skills):
             m = labels == k
             if m.any():

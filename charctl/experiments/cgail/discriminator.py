@@ -1,9 +1,7 @@
 """Conditional discriminator (style head D and class head C), its losses and the rewards.
 
 Input φ = (o_t, o_t+1), normalised with statistics of the demonstration data (frozen).
-All layers spectral-normalised (paper §5.3). Spectral norm also bounds the class logits, and with them
-how confident the classifier can become; `learn_class_scale` multiplies the class logits by a learned
-temperature exp(s) (s starts at 0, trained with the class head) so that cross-entropy sets the confidence.
+All layers spectral-normalised (paper §5.3).
 Losses (eq 4.2-4.6):
     L_style = E_M[(D - 1)^2] + E_pi[(D + 1)^2]
     L_class = CE(C(φ_M), clip label) + CE(C(φ_pi), c̄)       (soft target c̄ during transitions)
@@ -41,7 +39,6 @@ class Discriminator(nn.Module):
         hidden: list[int],
         conditional: bool = True,
         activation: str = "relu",
-        learn_class_scale: bool = False,
         style_head: str = "shared",
     ):
         super().__init__()
@@ -58,8 +55,6 @@ class Discriminator(nn.Module):
         self.style_head = SN(nn.Linear(d, num_classes if self.per_skill else 1))
         self.conditional = conditional
         self.class_head = SN(nn.Linear(d, num_classes)) if conditional else None
-        # log of the class logits' temperature; a parameter only when learned (older checkpoints load unchanged)
-        self.class_log_scale = nn.Parameter(torch.zeros(())) if conditional and learn_class_scale else None
         self.num_classes = num_classes
 
     def forward(
@@ -78,10 +73,7 @@ class Discriminator(nn.Module):
             d = d.squeeze(-1)
         if self.class_head is None:
             return d, None
-        logits = self.class_head(h)
-        if self.class_log_scale is not None:
-            logits = logits * self.class_log_scale.exp()
-        return d, logits
+        return d, self.class_head(h)
 
 
 def frozen_copy(disc: Discriminator) -> Discriminator:
@@ -101,15 +93,9 @@ def frozen_copy(disc: Discriminator) -> Discriminator:
     return out.requires_grad_(False)
 
 
-def style_loss(d_data: torch.Tensor, d_policy: torch.Tensor, kind: str = "lsgan") -> torch.Tensor:
-    """Style loss. ``lsgan`` (eq 4.4): data -> +1, policy -> -1 (least squares on the raw score).
-    ``bce``: binary cross-entropy on the logit D, data -> 1, policy -> 0 (the loss AMP's GPU
-    re-implementations use)."""
-    if kind == "lsgan":
-        return ((d_data - 1.0) ** 2).mean() + ((d_policy + 1.0) ** 2).mean()
-    if kind == "bce":
-        return F.softplus(-d_data).mean() + F.softplus(d_policy).mean()
-    raise ValueError(f"unknown style loss {kind!r}")
+def style_loss(d_data: torch.Tensor, d_policy: torch.Tensor) -> torch.Tensor:
+    """LSGAN style loss (eq 4.4): data -> +1, policy -> -1 (least squares on the raw score)."""
+    return ((d_data - 1.0) ** 2).mean() + ((d_policy + 1.0) ** 2).mean()
 
 
 def wrong_skill_labels(
@@ -119,16 +105,6 @@ def wrong_skill_labels(
     for a skill it does not belong to is a fake for that skill's style logit). Needs num_classes >= 2."""
     shift = torch.randint(1, num_classes, labels.shape, generator=generator).to(labels.device)
     return (labels + shift) % num_classes
-
-
-def logit_regulariser(disc: Discriminator) -> torch.Tensor:
-    """Sum of squares of the style head's weights (the 'logit regularisation' of AMP)."""
-    return (disc.style_head.weight**2).sum()
-
-
-def weight_decay_term(disc: Discriminator) -> torch.Tensor:
-    """Sum of squares of every linear weight of trunk and heads (biases excluded)."""
-    return sum((m.weight**2).sum() for m in disc.modules() if isinstance(m, nn.Linear))
 
 
 def class_loss(logits: torch.Tensor, target: torch.Tensor, kind: str = "ce") -> torch.Tensor:
@@ -151,17 +127,9 @@ def gradient_penalty(
     return 0.5 * w_gp * (grad**2).sum(-1).mean()
 
 
-def style_reward(d: torch.Tensor, kind: str = "lsgan") -> torch.Tensor:
-    """Style reward from the discriminator score.
-
-    ``lsgan`` (eq 4.7): r_S = clip(1 - 1/4 (1 - D)^2, 0, 1), in [0, 1].
-    ``bce``: r_S = -log(max(1 - sigmoid(D), 1e-4)), in [0, 9.2]; paired with the bce loss.
-    """
-    if kind == "lsgan":
-        return torch.clamp(1.0 - 0.25 * (1.0 - d) ** 2, 0.0, 1.0)
-    if kind == "bce":
-        return -torch.log(torch.clamp(1.0 - torch.sigmoid(d), min=1e-4))
-    raise ValueError(f"unknown style reward {kind!r}")
+def style_reward(d: torch.Tensor) -> torch.Tensor:
+    """Style reward from the discriminator score (eq 4.7): r_S = clip(1 - 1/4 (1 - D)^2, 0, 1), in [0, 1]."""
+    return torch.clamp(1.0 - 0.25 * (1.0 - d) ** 2, 0.0, 1.0)
 
 
 def class_reward(probs: torch.Tensor, target: torch.Tensor) -> torch.Tensor:

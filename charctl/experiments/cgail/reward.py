@@ -16,7 +16,7 @@ def discriminator_rewards(agent: Agent, ro: Rollout) -> dict[str, torch.Tensor]:
     """r_S, r_C (blended) and class probabilities for every rollout pair, in one forward."""
     T, N = ro.pairs.shape[:2]
     d, logits = agent.disc(ro.pairs.reshape(T * N, -1), cond=ro.cond.reshape(T * N, -1))
-    out = {"d": d.reshape(T, N), "r_style": style_reward(d, agent.cfg.disc.objective).reshape(T, N)}
+    out = {"d": d.reshape(T, N), "r_style": style_reward(d).reshape(T, N)}
     if logits is not None:
         probs = F.softmax(logits, dim=-1)
         out["probs"] = probs.reshape(T, N, -1)

@@ -117,7 +117,7 @@ def rollout_skill(tr: DeviceRun, skill: int, episodes: int, seconds: float, seed
     d, logits = tr.discriminate_for(np.concatenate(pairs), skill)
 
     probs = F.softmax(logits, -1).cpu().numpy() if logits is not None else None
-    r_style = style_reward(d, tr.agent.cfg.disc.objective).cpu().numpy()
+    r_style = style_reward(d).cpu().numpy()
     return SkillRollout([np.array(r) for r in rots], probs, r_style, falls)
 
 
@@ -201,7 +201,7 @@ def switch_rollout(
             tr.cfg.reward.class_form,
         )
         probs.append(p)  # device tensors; to the host once, after the episode
-        rs.append(style_reward(d, tr.agent.cfg.disc.objective))
+        rs.append(style_reward(d))
         rc.append(r_c)
         alive_hist.append(alive.copy())
         alive &= ~res.terminated

@@ -26,22 +26,16 @@ class SkillData:
     mean_speed: float  # m/s planar root speed over the clip (target speed of the heading goal)
     local_rot: np.ndarray  # (T, 15, 4) for pose-error evaluation
     fps: float
-    fine_obs: np.ndarray | None = None  # (~T*k, 133) disc observations at k times the control rate
-    oversample: int = 1  # k
 
 
-def load_skills(skills, control_hz: float, oversample: int = 1) -> list[SkillData]:
-    """Load and resample every skill's clip to `control_hz` (and, with `oversample` k > 1, the
-    discriminator observations also at k * control_hz, for demonstration pairs at in-between times)."""
+def load_skills(skills, control_hz: float) -> list[SkillData]:
+    """Load and resample every skill's clip to `control_hz`."""
     out = []
     for s in skills:
         clip = load_clip(s.clip).resample(control_hz)
         qpos, qvel = clip_to_qpos_qvel(clip)
         obs = disc_obs(clip_kinematics(clip))
         planar = np.linalg.norm(np.diff(clip.root_pos[:, [0, 2]], axis=0), axis=1).sum()
-        fine = (
-            disc_obs(clip_kinematics(load_clip(s.clip).resample(control_hz * oversample))) if oversample > 1 else None
-        )
         out.append(
             SkillData(
                 s.name,
@@ -54,8 +48,6 @@ def load_skills(skills, control_hz: float, oversample: int = 1) -> list[SkillDat
                 float(planar / max(clip.duration, 1e-9)),
                 clip.local_rot,
                 clip.fps,
-                fine,
-                oversample,
             )
         )
     return out
@@ -69,11 +61,8 @@ def select_skills(cfg):
 
 
 def _pairs(skill: SkillData) -> np.ndarray:
-    """(o(t), o(t + 1/control_hz)) pairs: at clip frames, or at every fine time when oversampled."""
-    if skill.fine_obs is None:
-        return np.concatenate([skill.obs[:-1], skill.obs[1:]], axis=1).astype(np.float32)
-    k = skill.oversample
-    return np.concatenate([skill.fine_obs[:-k], skill.fine_obs[k:]], axis=1).astype(np.float32)
+    """(o(t), o(t + 1/control_hz)) pairs at the clip's frames."""
+    return np.concatenate([skill.obs[:-1], skill.obs[1:]], axis=1).astype(np.float32)
 
 
 class DemoPairs:

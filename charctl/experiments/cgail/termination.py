@@ -18,9 +18,9 @@ from charctl.experiments.cgail.discriminator import Discriminator, frozen_copy, 
 
 
 class LowStyleTermination:
-    def __init__(self, disc: Discriminator, num_envs: int, threshold: float, steps: int, objective: str):
+    def __init__(self, disc: Discriminator, num_envs: int, threshold: float, steps: int):
         self.disc = frozen_copy(disc)  # spectral norms computed once per snapshot, not per step
-        self.threshold, self.steps, self.objective = float(threshold), int(steps), objective
+        self.threshold, self.steps = float(threshold), int(steps)
         self.low = torch.zeros(num_envs, dtype=torch.long, device=next(disc.parameters()).device)
 
     def sync(self, disc: Discriminator) -> None:
@@ -32,7 +32,7 @@ class LowStyleTermination:
         """(N,) bool: envs whose episode this step's pairs (N, 266) under command blend `cond` (N, K)
         end. `done` (N,) bool: episodes that ended anyway this step (their counts restart)."""
         d, _ = self.disc(pairs, cond=cond)
-        low = style_reward(d, self.objective) < self.threshold
+        low = style_reward(d) < self.threshold
         self.low = torch.where(low, self.low + 1, torch.zeros_like(self.low))
         end = (self.low >= self.steps) & ~done
         self.low[done | end] = 0

@@ -35,16 +35,6 @@ def _synchronize(device: str) -> None:
         torch.cuda.synchronize(device)
 
 
-def episode_limit_steps(env_cfg, samples: int) -> int:
-    """Truncation length (control steps) of training episodes after `samples` samples: the
-    curriculum's start length growing linearly to `episode_seconds` over `curriculum_samples`
-    (env.curriculum_*), or `episode_seconds` throughout when the curriculum is off."""
-    full = env_cfg.episode_seconds
-    start = env_cfg.curriculum_start_seconds or full
-    seconds = start + (full - start) * min(1.0, samples / env_cfg.curriculum_samples)
-    return max(1, int(round(seconds * env_cfg.control_hz)))
-
-
 class CgailLearner(AgentCounters):
     """One cgail iteration for the shared runner (charctl.rl.runner): rollout, rewards, PPO,
     discriminator. Counters live on the agent so checkpoints keep their layout."""
@@ -82,9 +72,7 @@ class CgailLearner(AgentCounters):
         self.pending: Rollout | None = None
         rc = cfg.reward
         self.terminate = (
-            LowStyleTermination(
-                self.agent.disc, self.env.N, rc.low_style_threshold, rc.low_style_steps, cfg.disc.objective
-            )
+            LowStyleTermination(self.agent.disc, self.env.N, rc.low_style_threshold, rc.low_style_steps)
             if rc.low_style_threshold > 0
             else None
         )
@@ -181,7 +169,6 @@ class CgailLearner(AgentCounters):
 
     def _rollout(self, actor: Agent) -> Rollout:
         """`train.rollout_steps` control steps of every env, acting with `actor`'s policy."""
-        self.env.max_steps = episode_limit_steps(self.cfg.env, self.agent.samples)
         return collect_rollout(actor, self.env, self.cfg.train.rollout_steps, terminate=self.terminate)
 
     def _rewards(self, ro: Rollout) -> tuple[dict[str, torch.Tensor], torch.Tensor]:
@@ -232,7 +219,6 @@ class CgailLearner(AgentCounters):
             "train/r_track": float(ro.r_track.mean()),
             "train/reward": float(reward.mean()),
             "train/episode_length": mean_len,
-            "train/episode_limit": float(env.max_steps),
             "train/unstable_resets_total": float(agent.unstable_total),
             "train/falls": float(ro.falls),
             "train/style_terminations": float(ro.style_ends),

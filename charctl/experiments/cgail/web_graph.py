@@ -146,8 +146,6 @@ class WebGraph(nn.Module):
         frozen = frozen_copy(disc)
         self.disc_trunk, self.style_head, self.class_head = frozen.trunk, frozen.style_head, frozen.class_head
         self.per_skill_style = bool(getattr(disc, "per_skill", False))
-        scale = getattr(disc, "class_log_scale", None)
-        self.class_scale = float(scale.detach().exp()) if scale is not None else 1.0
 
     def lowest_heights(self, geom_xpos: torch.Tensor, geom_xmat: torch.Tensor) -> torch.Tensor:
         """(B, G) lowest world y of every non-foot character geom (`batch._lowest_y`: spheres r, capsules
@@ -203,7 +201,7 @@ class WebGraph(nn.Module):
         d = (d * command.float()).sum(-1) if self.per_skill_style else d[:, 0]
         style = torch.clamp(1.0 - 0.25 * (1.0 - d) ** 2, 0.0, 1.0).to(f64)
         if self.class_head is not None:
-            probs = torch.softmax(self.class_head(h) * self.class_scale, dim=-1).to(f64)
+            probs = torch.softmax(self.class_head(h), dim=-1).to(f64)
         else:
             probs = torch.zeros_like(command)
         fell = (self.lowest_heights(geom_xpos, geom_xmat) < self.fall_tolerance).any(dim=1).to(f64)
