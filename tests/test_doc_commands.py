@@ -352,19 +352,18 @@ def test_smoke_argv_substitutions(tmp_path):
     ]
     cmd = DocCommand("docs/srb.md", 1, "charctl train srb --resume outputs/srb/<run> train.total_samples=3000000")
     assert smoke_argv(cmd, runs, tmp_path) == ["train", "srb", "--resume", "/runs/srb_copy", "train.total_samples=8192"]
-    committed = REPO / "pretrained/in-progress/cgail-10skill-fidelity"
-    if committed.is_dir():  # a committed run is resumed from a copy, one iteration past its samples
-        samples = json.loads((committed / "metrics.json").read_text())["samples"]
-        cmd = DocCommand("x.md", 1, "charctl train cgail --resume pretrained/in-progress/cgail-10skill-fidelity")
-        argv = smoke_argv(cmd, runs, tmp_path)
-        assert argv == [
-            "train",
-            "cgail",
-            "--resume",
-            str(tmp_path / committed.name),
-            f"train.total_samples={samples + 1}",
-        ]
-        assert (tmp_path / committed.name / "config.yaml").read_text() == (committed / "config.yaml").read_text()
+    committed = REPO / "pretrained/cgail-3skill-fidelity"  # a committed run is resumed from a copy, one iteration on
+    samples = json.loads((committed / "metrics.json").read_text())["samples"]
+    cmd = DocCommand("x.md", 1, "charctl train cgail --resume pretrained/cgail-3skill-fidelity")
+    argv = smoke_argv(cmd, runs, tmp_path)
+    assert argv == [
+        "train",
+        "cgail",
+        "--resume",
+        str(tmp_path / committed.name),
+        f"train.total_samples={samples + 1}",
+    ]
+    assert (tmp_path / committed.name / "config.yaml").read_text() == (committed / "config.yaml").read_text()
     cmd = DocCommand("README.md", 1, "charctl train com-cnn -m data.history=45,90 model.kernel=2,5")
     assert smoke_argv(cmd, runs, tmp_path)[-2:] == ["scale=smoke", f"output_root={tmp_path / 'outputs'}"]
     line = 'charctl export RUN --commands "a:0,b:3"   # a # comment'
