@@ -35,6 +35,16 @@ def with_fault_hooks(env: dict[str, str]) -> dict[str, str]:
     return env
 
 
+def cgail_paper_recipe() -> list[str]:
+    """mk/cgail.mk's CGAIL_PAPER_RECIPE: the `~key` deletions that return the small preset's fidelity-recipe keys to
+    the schema's (the paper's) values."""
+    import re
+
+    text = (REPO / "mk" / "cgail.mk").read_text()
+    body = re.search(r"^CGAIL_PAPER_RECIPE := (.*?)\n(?!\t)", text, re.S | re.M).group(1)
+    return body.replace("\\\n", " ").split()
+
+
 def cli_env(**extra: str) -> dict[str, str]:
     """Environment for a charctl subprocess: wide, colourless rich output, no GPU/renderer surprises;
     CHARCTL_FAULT_* variables in `extra` switch the test-only checkpoint faults on (`with_fault_hooks`)."""

@@ -11,13 +11,9 @@ minimum was 0.04-0.07; measured with the recipe: minimum 0.55 at 300k samples).
 import numpy as np
 import pytest
 
-pytestmark = pytest.mark.slow
+from conftest import cgail_paper_recipe
 
-PAPER_RECIPE = (
-    "~disc.style_head ~disc.wrong_skill_fakes ~cgail.class_on_policy ~reward.w_style ~reward.w_class "
-    "~reward.class_form ~reward.low_style_threshold ~reward.pose_error_threshold ~reward.w_track "
-    "~env.phase_obs ~env.skill_fall_weight ~ppo.desired_kl ~ppo.lr_max"
-).split()
+pytestmark = pytest.mark.slow
 
 
 @pytest.fixture(scope="module")
@@ -30,7 +26,7 @@ def scalars(tmp_path_factory):
         "scale=small",
         # the paper's reward and termination (mk/cgail.mk CGAIL_PAPER_RECIPE): these checks were written for it,
         # before the small preset took the fidelity recipe
-        *PAPER_RECIPE,
+        *cgail_paper_recipe(),
         "use_skills=[walk,right_kick]",
         "train.total_samples=300000",
         f"output_root={root}",

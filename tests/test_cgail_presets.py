@@ -2,8 +2,6 @@
 (mk/cgail.mk's CGAIL_PAPER_RECIPE); the AMP and tracking baselines drop the recipe keys that do not apply to
 them when a config is composed, but not a key the command line sets, and not in a recorded run's config."""
 
-import re
-
 import pytest
 from omegaconf import OmegaConf
 
@@ -11,17 +9,11 @@ from charctl.config import compose_config, validate
 from charctl.errors import CharctlError
 from charctl.experiments.cgail.config import Config
 
-from conftest import REPO
+from conftest import cgail_paper_recipe
 
 
 def _compose(*overrides: str):
     return compose_config("cgail", list(overrides), Config)
-
-
-def _paper_recipe_from_make() -> list[str]:
-    text = (REPO / "mk" / "cgail.mk").read_text()
-    body = re.search(r"^CGAIL_PAPER_RECIPE := (.*?)\n(?!\t)", text, re.S | re.M).group(1)
-    return body.replace("\\\n", " ").split()
 
 
 def test_the_small_preset_is_run_h_recipe():
@@ -37,7 +29,7 @@ def test_the_small_preset_is_run_h_recipe():
 
 
 def test_the_paper_recipe_deletions_return_every_recipe_key_to_the_schema():
-    deletions = _paper_recipe_from_make()
+    deletions = cgail_paper_recipe()
     assert len(deletions) == 13 and all(d.startswith("~") for d in deletions)
     paper, recipe, schema = _compose("scale=small", *deletions), _compose("scale=small"), OmegaConf.structured(Config)
     for key in (d[1:] for d in deletions):
@@ -45,9 +37,6 @@ def test_the_paper_recipe_deletions_return_every_recipe_key_to_the_schema():
         assert OmegaConf.select(recipe, key) != OmegaConf.select(schema, key), f"{key}: the preset does not set it"
     # nothing else moves: the small scale's networks and rates stay
     assert paper.ppo.hidden == recipe.ppo.hidden == [256, 256] and paper.env.physics_hz == 150.0
-    from test_cgail_learning import PAPER_RECIPE
-
-    assert list(PAPER_RECIPE) == deletions
 
 
 def test_the_baselines_drop_the_keys_that_do_not_apply():
