@@ -91,6 +91,22 @@ def test_an_in_place_looping_clip_keeps_its_timing():
     assert err[1] == pytest.approx(reference_pose_error(crouch[None], skills[1].obs[25:26])[0]) and err[1] > 0.3
 
 
+def test_a_root_height_radius_ends_a_jump_done_on_the_ground():
+    """reward.root_height_threshold: the jump's highest frame with the root put 0.2 m lower (hands and feet
+    unchanged relative to the root) is within the 0.5 m pose threshold, but beyond a 0.15 m root radius."""
+    skills = load_skills([SkillConfig("jump", "jump")], 30.0)
+    top = int(np.argmax(skills[0].obs[:, 0]))
+    grounded = skills[0].obs[top].copy()
+    grounded[0] -= 0.2
+    for radius, ended in ((0.0, False), (0.15, True)):
+        cfg = OmegaConf.structured(EnvConfig(num_envs=1, switch_prob=0.0))
+        env = CgailEnv(skills, cfg, seed=0, pose_error_threshold=0.5, root_height_threshold=radius)
+        env.ref_frame[:] = top
+        err, _ = env._pose_error(grounded[None], env._reference_obs())
+        assert err[0] == pytest.approx(0.2 * (0.5 / radius if radius else 1.0))
+        assert bool(err[0] > env.pose_threshold) is ended
+
+
 def test_episodes_that_leave_the_reference_end_without_counting_a_fall(skills):
     """A threshold of 1 mm ends every checked kick episode after its first simulated step; 10 m never does."""
     strict = _env(skills, threshold=1e-3, grace=0)

@@ -71,6 +71,22 @@ def test_pose_key_error_broadcasts_over_clip_frames(arr):
     np.testing.assert_allclose(_np(rules.reference_pose_error(arr(obs), arr(clip[1:2]))), [0.3], atol=1e-12)
 
 
+@pytest.mark.parametrize("arr", LIBS)
+def test_root_height_threshold_scales_the_root_term_against_the_pose_threshold(arr):
+    """Root 0.2 m lower and a hand 0.3 m off: with the pose threshold 0.5 m and a root-height radius of
+    0.1 m the root counts 0.2 x 0.5 / 0.1 = 1.0 (> 0.5: ended); off (radius 0) it counts 0.2 (the hand's
+    0.3 is the error); a root 0.05 m lower stays under the radius (0.25 < 0.5)."""
+    assert rules.root_height_scale(0.5, 0.1) == pytest.approx(5.0)
+    assert rules.root_height_scale(0.5, 0.0) == 1.0 and rules.root_height_scale(0.0, 0.1) == 1.0
+    obs, ref = np.zeros((2, 133)), np.zeros((2, 133))
+    obs[:, 0] = 0.9
+    ref[:, 0] = [1.1, 0.95]
+    ref[:, 121] = 0.3
+    scaled = rules.reference_pose_error(arr(obs), arr(ref), rules.root_height_scale(0.5, 0.1))
+    np.testing.assert_allclose(_np(scaled), [1.0, 0.3], atol=1e-12)
+    np.testing.assert_allclose(_np(rules.reference_pose_error(arr(obs), arr(ref))), [0.3, 0.3], atol=1e-12)
+
+
 def test_state_width():
     assert rules.state_dim(False) == 243 and rules.state_dim(True) == 245
 

@@ -107,6 +107,11 @@ class RewardConfig:
     # that follow each restart. 0 = off (the paper). docs/cgail.md, "Fidelity recipe".
     pose_error_threshold: float = 0.0
     pose_error_grace_steps: int = 10  # control steps after a reference restart with no check (time to reach frame 0)
+    # Root-height radius (m) of the same check: > 0 ends an episode also where the root height differs from the
+    # reference's by more than this, so a jump done on the ground (its clip's root rises 0.29 m above the stance)
+    # is ended at the clip's flight. 0 = the root height counts against pose_error_threshold like a hand or foot.
+    # Needs pose_error_threshold > 0. docs/cgail.md, "Flight".
+    root_height_threshold: float = 0.0
     # Weight w_T of a DeepMimic tracking reward (env.tracking_reward, in [0, 1]) against the pose-error check's
     # reference (the timed frame of a non-looping clip, the closest frame of a looping one), added to eq 4.1
     # where the reference is checked (0 during ramps and grace steps). Needs pose_error_threshold > 0.
@@ -209,7 +214,12 @@ class Config(BaseConfig):
         if not cfg.cgail.conditional:
             keys += ["disc.style_head", "disc.wrong_skill_fakes"]
         if cfg.reward.kind == "tracking":
-            keys += ["reward.low_style_threshold", "reward.pose_error_threshold", "reward.w_track"]
+            keys += [
+                "reward.low_style_threshold",
+                "reward.pose_error_threshold",
+                "reward.root_height_threshold",
+                "reward.w_track",
+            ]
         return keys
 
     @staticmethod
@@ -249,6 +259,8 @@ def _check_rewards(cfg) -> str | None:
         return "reward.pose_error_threshold and reward.pose_error_grace_steps must be >= 0"
     if r.pose_error_threshold > 0 and r.kind != "adversarial":
         return "reward.pose_error_threshold > 0 needs reward.kind=adversarial"
+    if r.root_height_threshold < 0 or (r.root_height_threshold > 0 and r.pose_error_threshold <= 0):
+        return "reward.root_height_threshold must be >= 0, and > 0 only with reward.pose_error_threshold > 0"
     if r.w_track < 0 or (r.w_track > 0 and r.pose_error_threshold <= 0):
         return "reward.w_track must be >= 0, and > 0 only with reward.pose_error_threshold > 0 (its reference)"
     n_skills = len(cfg.use_skills) if cfg.use_skills else len(cfg.skills)

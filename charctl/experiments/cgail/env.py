@@ -41,6 +41,7 @@ from charctl.experiments.cgail.rules import (
     pose_key_error,
     pose_keys,
     reference_pose_error,
+    root_height_scale,
     restart_after_ramp,
     skill_probabilities,
     state_dim,
@@ -77,12 +78,14 @@ class CgailEnv:
         tracking: bool = False,
         pose_error_threshold: float = 0.0,
         pose_error_grace_steps: int = 10,
+        root_height_threshold: float = 0.0,
         reference_reward: bool = False,
     ):
         self.skills = skills
         self.tracking = tracking  # phase in the state, reference frame advanced every step
         # training only (reward.pose_error_threshold): end episodes that leave the clip's timed reference
         self.pose_threshold, self.pose_grace = float(pose_error_threshold), int(pose_error_grace_steps)
+        self.root_scale = root_height_scale(self.pose_threshold, float(root_height_threshold))
         self.reference_reward = bool(reference_reward)  # r_track against that reference (reward.w_track)
         self.cfg = env_cfg = plain_section(env_cfg)  # typed fields, cheap reads in the step loop
         # env.phase_obs: the timed reference's phase in the state of the adversarial policy (training and evaluation)
@@ -238,11 +241,11 @@ class CgailEnv:
         no error. In-place looping clips (jump, dances, spinkick) keep the timed reference, so standing in
         one of their poses is an error once the clip moves on. Returns the reference each env was scored
         against as well."""
-        err, ref = reference_pose_error(obs, ref), ref.copy()
+        err, ref = reference_pose_error(obs, ref, self.root_scale), ref.copy()
         for s in np.unique(self.cmd[self.has_goal[self.cmd]]):
             m = np.flatnonzero(self.cmd == s)
             clip = self.skills[s].obs
-            each = pose_key_error(pose_keys(obs[m])[:, None], pose_keys(clip)[None])  # (n, T) m
+            each = pose_key_error(pose_keys(obs[m])[:, None], pose_keys(clip)[None], self.root_scale)  # (n, T) m
             best = each.argmin(axis=1)
             err[m], ref[m] = each[np.arange(len(m)), best], clip[best]
         return err, ref

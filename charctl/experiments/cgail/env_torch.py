@@ -45,6 +45,7 @@ from charctl.experiments.cgail.rules import (
     pose_key_error,
     pose_keys,
     reference_pose_error,
+    root_height_scale,
     restart_after_ramp,
     skill_probabilities,
     state_dim,
@@ -96,6 +97,7 @@ class CgailDeviceEnv:
         tracking: bool = False,
         pose_error_threshold: float = 0.0,
         pose_error_grace_steps: int = 10,
+        root_height_threshold: float = 0.0,
         reference_reward: bool = False,
         device: str | torch.device = "cpu",
         sim=None,
@@ -107,6 +109,7 @@ class CgailDeviceEnv:
         self.tracking = tracking  # phase in the state, reference frame advanced every step
         # as CgailEnv: the pose-error check against the clip's timed reference, r_track there, env.phase_obs
         self.pose_threshold, self.pose_grace = float(pose_error_threshold), int(pose_error_grace_steps)
+        self.root_scale = root_height_scale(self.pose_threshold, float(root_height_threshold))
         self.reference_reward = bool(reference_reward)
         self.phase_obs = bool(getattr(env_cfg, "phase_obs", False)) and not tracking
         self.timed_reference = self.pose_threshold > 0 or self.phase_obs  # reference advanced, restarting at frame 0
@@ -256,8 +259,8 @@ class CgailDeviceEnv:
     def _pose_error(self, obs: torch.Tensor, ref: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """((N,) m, (N, 133)) as `CgailEnv._pose_error`: against the timed reference `ref`, or, for skills with
         a heading goal, against their clip's closest frame (every env is scored both ways; a mask picks)."""
-        timed = reference_pose_error(obs, ref)
-        each = pose_key_error(pose_keys(obs)[:, None], self.ref_keys[self.cmd])  # (N, T); padding repeats frames
+        timed = reference_pose_error(obs, ref, self.root_scale)
+        each = pose_key_error(pose_keys(obs)[:, None], self.ref_keys[self.cmd], self.root_scale)  # (N, T); padding repeats frames
         closest, best = each.min(dim=1)
         goal = self.has_goal[self.cmd]
         scored = torch.where(goal[:, None], self.ref_obs[self.cmd, best], ref)

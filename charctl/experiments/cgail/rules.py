@@ -74,20 +74,32 @@ def pose_keys(obs: Array) -> Array:
     return xp.concat([obs[..., OBS_ROOT_H], obs[..., OBS_EE]], axis=-1)
 
 
-def pose_key_error(a: Array, b: Array) -> Array:
-    """(...) m: the largest of the four end-effector distances and the root-height difference between
-    `pose_keys` arrays `a` and `b` (..., 13), which broadcast (e.g. (n, 1, 13) against (1, T, 13))."""
+def pose_key_error(a: Array, b: Array, root_scale: float = 1.0) -> Array:
+    """(...) m: the largest of the four end-effector distances and `root_scale` times the root-height
+    difference between `pose_keys` arrays `a` and `b` (..., 13), which broadcast (e.g. (n, 1, 13) against
+    (1, T, 13)). `root_scale` = pose threshold / root-height threshold (`root_height_scale`) makes one
+    comparison with the pose threshold check both."""
     xp = namespace(a, b)
     d = a[..., 1:] - b[..., 1:]
     d = d.reshape(d.shape[:-1] + (4, 3))
     ee = xp.max(xp.sqrt(xp.sum(d * d, axis=-1)), axis=-1)
-    return xp.maximum(ee, xp.abs(a[..., 0] - b[..., 0]))
+    return xp.maximum(ee, root_scale * xp.abs(a[..., 0] - b[..., 0]))
 
 
-def reference_pose_error(obs: Array, ref: Array) -> Array:
+def reference_pose_error(obs: Array, ref: Array, root_scale: float = 1.0) -> Array:
     """(N,) m: the largest distance between simulated and reference disc observations (N, 133) over the
-    four end effectors (hands and feet, relative to the root in the heading frame) and the root height."""
-    return pose_key_error(pose_keys(obs), pose_keys(ref))
+    four end effectors (hands and feet, relative to the root in the heading frame) and the root height
+    (times `root_scale`, see `pose_key_error`)."""
+    return pose_key_error(pose_keys(obs), pose_keys(ref), root_scale)
+
+
+def root_height_scale(pose_threshold: float, root_height_threshold: float) -> float:
+    """The `root_scale` of `pose_key_error` for reward.root_height_threshold (m): pose_threshold /
+    root_height_threshold, so that err > pose_threshold exactly when an end effector is farther than
+    pose_threshold or the root height differs by more than root_height_threshold; 1 when it is 0 (off)."""
+    if root_height_threshold <= 0 or pose_threshold <= 0:
+        return 1.0
+    return pose_threshold / root_height_threshold
 
 
 def goal_features(goal_angle: Array, heading: Array, has_goal: Array) -> Array:

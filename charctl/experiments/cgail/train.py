@@ -55,6 +55,7 @@ class CgailLearner(AgentCounters):
             tracking=cfg.reward.kind == "tracking",
             pose_error_threshold=cfg.reward.pose_error_threshold,
             pose_error_grace_steps=cfg.reward.pose_error_grace_steps,
+            root_height_threshold=cfg.reward.root_height_threshold,
             reference_reward=cfg.reward.w_track > 0,
         )
         if self.backend == "warp":  # MuJoCo Warp on the same device: rollout never leaves it
