@@ -84,9 +84,16 @@ repro-cgail-10skill-fidelity-gpu: install ## cgail: repro-cgail-10skill-fidelity
 	$(CHARCTL) eval $$T --checkpoints --after 50000000 -k 16 device=cpu && $(CHARCTL) eval $$T --fidelity -k 4 device=cpu
 
 .PHONY: repro-cgail-tracking-3skill
-repro-cgail-tracking-3skill: install ## cgail: the multi-skill tracking baseline (walk, run, right_kick; command and phase in the state), the fidelity anchor; not yet trained to the end here
-	$(CHARCTL) train cgail scale=small reward.kind=tracking env.switch_prob=0 ppo.desired_kl=0.02 ppo.lr_max=1e-4 train.total_samples=$(CGAIL_FID_SAMPLES) train.checkpoint_every=20 train.keep_checkpoint_every=2500000 seed=1 output_root=$(CGAIL_FID)/tracking
-	T=$$(ls -d $(CGAIL_FID)/tracking/cgail/*/ | tail -1); $(CHARCTL) eval $$T --fidelity --survival 5 --dtw -k 4
+repro-cgail-tracking-3skill: install ## cgail: the multi-skill tracking baseline (walk, run, right_kick; command and phase in the state; 4e7 samples, ~80 min on 2 cores) = pretrained/tracking-3skill, evaluated
+	$(CHARCTL) train cgail reward.kind=tracking env.switch_prob=0 train.total_samples=$(CGAIL_FID_SAMPLES) train.checkpoint_every=20 train.keep_checkpoint_every=2500000 seed=1 output_root=$(CGAIL_FID)/tracking
+	T=$$(ls -d $(CGAIL_FID)/tracking/cgail/*/ | tail -1); $(CHARCTL) eval $$T --fidelity -k 4 && $(CHARCTL) eval $$T --survival 5 -k 32 && $(CHARCTL) eval $$T --dtw -k 8
+
+# The flight experiment (docs/cgail.md, "Flight"): the recipe on walk, run and jump with a 0.15-m root-height radius
+# in the pose-error check, so a jump done on the ground ends at the clip's flight.
+.PHONY: repro-cgail-flight
+repro-cgail-flight: install ## cgail: the recipe plus reward.root_height_threshold=0.15 on walk, run, jump (2.5e7 samples; ~50 min on 2 cores), evaluated
+	$(CHARCTL) train cgail "use_skills=[walk,run,jump]" reward.root_height_threshold=0.15 train.total_samples=25000000 train.checkpoint_every=20 train.keep_checkpoint_every=2500000 seed=1 output_root=$(CGAIL_FID)/flight
+	F=$$(ls -d $(CGAIL_FID)/flight/cgail/*/ | tail -1); $(CHARCTL) eval $$F --fidelity -k 4 && $(CHARCTL) eval $$F --survival 5 -k 32 && $(CHARCTL) eval $$F --dtw -k 8
 
 repro-cgail-small: install ## cgail: the shipped policies' runs (pretrained/README.md: cGAIL 3 skills, AMP and tracking walk; ~3 h on 2 cores), evaluated
 	$(CHARCTL) train cgail scale=small train.total_samples=8000000 $(CGAIL_SHIPPED) seed=1 output_root=$(CGAIL_SMALL)/cgail

@@ -107,7 +107,7 @@ class RewardConfig:
     # that follow each restart. 0 = off (the paper). docs/cgail.md, "Fidelity recipe".
     pose_error_threshold: float = 0.0
     pose_error_grace_steps: int = 10  # control steps after a reference restart with no check (time to reach frame 0)
-    # Root-height radius (m) of the same check: > 0 ends an episode also where the root height differs from the
+    # Root-height radius (m) of the pose-error check: > 0 ends an episode also where the root height differs from the
     # reference's by more than this, so a jump done on the ground (its clip's root rises 0.29 m above the stance)
     # is ended at the clip's flight. 0 = the root height counts against pose_error_threshold like a hand or foot.
     # Needs pose_error_threshold > 0. docs/cgail.md, "Flight".
