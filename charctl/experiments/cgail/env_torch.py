@@ -45,8 +45,8 @@ from charctl.experiments.cgail.rules import (
     pose_key_error,
     pose_keys,
     reference_pose_error,
-    root_height_scale,
     restart_after_ramp,
+    root_height_scale,
     skill_probabilities,
     state_dim,
     switch_commands,
@@ -260,7 +260,8 @@ class CgailDeviceEnv:
         """((N,) m, (N, 133)) as `CgailEnv._pose_error`: against the timed reference `ref`, or, for skills with
         a heading goal, against their clip's closest frame (every env is scored both ways; a mask picks)."""
         timed = reference_pose_error(obs, ref, self.root_scale)
-        each = pose_key_error(pose_keys(obs)[:, None], self.ref_keys[self.cmd], self.root_scale)  # (N, T); padding repeats frames
+        # (N, T); padding repeats frames
+        each = pose_key_error(pose_keys(obs)[:, None], self.ref_keys[self.cmd], self.root_scale)
         closest, best = each.min(dim=1)
         goal = self.has_goal[self.cmd]
         scored = torch.where(goal[:, None], self.ref_obs[self.cmd, best], ref)

@@ -1,0 +1,68 @@
+"""How a cgail policy's flight phases compare with its clips', measured three ways (docs/cgail.md, "Flight").
+
+    .venv/bin/python scripts/diag_flight.py RUN [-k 2]
+
+Per skill, the share of frames (clip: one loop of a looping clip, from the middle of three; policy: -k
+5-s episodes at the clip's frame 0, mean actions, as `charctl eval --fidelity` records them):
+
+- `feet > 5 cm`: the fidelity signature's `airborne` (both foot soles 5 cm above standing: the floor for
+  the policy, the clip's own 10th-percentile sole height for the clip, whose feet sink up to 7 cm);
+- `ballistic`: the root's vertical acceleration below -0.7 g (finite differences at the control rate):
+  the body falls freely, as it does in flight, but also in a quick drop into a crouch;
+- `both`: feet > 5 cm and ballistic; `feet > 2 cm and ballistic` the same with a 2-cm margin.
+
+A diagnostic for the airborne signature (the clip's sunk stance feet can count as "airborne"), not a
+target: a policy that drops into a crouch without leaving the ground scores on `ballistic` alone.
+"""
+
+from __future__ import annotations
+
+import argparse
+
+import numpy as np
+
+G = 9.81
+BALLISTIC = 0.7  # fraction of g
+
+
+def flight_shares(pos: np.ndarray, rot: np.ndarray, dt: float, ground: float, loop: bool) -> tuple[float, ...]:
+    """(feet > 5 cm, ballistic, both, feet > 2 cm and ballistic) shares of the frames of one sequence
+    (`pos` (T, 15, 3), `rot` (T, 15, 4) world; `ground` the standing sole height)."""
+    from charctl.eval.fidelity import foot_sole_heights
+
+    if loop:  # three loops so the finite differences see the wrap; score the middle one
+        pos, rot = np.concatenate([pos] * 3), np.concatenate([rot] * 3)
+    sole = foot_sole_heights(pos, rot).min(axis=1) - ground
+    accel = np.gradient(np.gradient(pos[:, 0, 1], dt), dt)
+    ballistic = accel < -BALLISTIC * G
+    n = len(sole) // 3 if loop else 0
+    keep = slice(n, 2 * n) if loop else slice(None)
+    parts = (sole > 0.05, ballistic, (sole > 0.05) & ballistic, (sole > 0.02) & ballistic)
+    return tuple(float(p[keep].mean()) for p in parts)
+
+
+def main() -> None:
+    from charctl.experiments.cgail import fidelity as F
+    from charctl.experiments.cgail.rollouts import load_eval_run
+
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("run")
+    ap.add_argument("-k", type=int, default=2, help="policy episodes per skill")
+    args = ap.parse_args()
+    run = load_eval_run(args.run, device="cpu")
+    skills = run.agent.skills
+    recs = F.record_rollouts(run, list(range(len(skills))), args.k, [5.0] * len(skills))
+    print(f"{'skill':12s} {'':8s} feet>5cm ballistic both feet>2cm&ballistic")
+    for skill, rec in zip(skills, recs):
+        ref = F.clip_reference(skill)
+        clip = flight_shares(ref.body_pos, ref.body_rot, ref.dt, ref.ground, ref.loop)
+        eps = [
+            flight_shares(rec.body_pos[e, : rec.lengths[e]], rec.body_rot[e, : rec.lengths[e]], rec.dt, 0.0, False)
+            for e in range(args.k)
+        ]
+        print(f"{skill.name:12s} {'clip':8s}", " ".join(f"{v:8.2f}" for v in clip))
+        print(f"{'':12s} {'policy':8s}", " ".join(f"{v:8.2f}" for v in np.mean(eps, axis=0)))
+
+
+if __name__ == "__main__":
+    main()
