@@ -102,6 +102,8 @@ def skip_reason(cmd: DocCommand) -> str | None:
         return "needs the user's own BVH folder"
     if "runtime.address=" in text or re.search(r"--address\s+(?!none\b)\S", text):
         return "joins a running Ray cluster"
+    if any(a.startswith("~") for a in cmd.argv):
+        return "deletes a key of the small preset; the smoke preset it would run at sets none (test_cgail_presets.py)"
     if len(cmd.argv) < 2 and cmd.argv[:1] != ["play"]:
         return "names a command, not a command line"
     if cmd.inline and all(a.startswith("-") for a in cmd.argv[1:]):
