@@ -26,6 +26,17 @@ CHARCTL = VENV_BIN / "charctl"
 FAULT_HOOKS = REPO / "tests" / "fault_hooks"  # sitecustomize.py: CHARCTL_FAULT_* checkpoint faults
 
 
+def load_script(name: str):
+    """The module of scripts/<name>.py (scripts are not a package), registered in sys.modules."""
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location(name, REPO / "scripts" / f"{name}.py")
+    mod = importlib.util.module_from_spec(spec)
+    sys.modules[name] = mod
+    spec.loader.exec_module(mod)
+    return mod
+
+
 def with_fault_hooks(env: dict[str, str]) -> dict[str, str]:
     """`env` with the fault hooks on PYTHONPATH when it sets a CHARCTL_FAULT_* variable (a subprocess
     then imports tests/fault_hooks/sitecustomize.py at start-up, which installs the faults)."""

@@ -2,21 +2,15 @@
 
 from __future__ import annotations
 
-import importlib.util
-from pathlib import Path
-
 import numpy as np
 
 from charctl.eval.fidelity import foot_sole_heights
 
-SCRIPT = Path(__file__).resolve().parents[1] / "scripts" / "diag_flight.py"
+from conftest import load_script
 
 
 def _load_script():
-    spec = importlib.util.spec_from_file_location("diag_flight", SCRIPT)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    return load_script("diag_flight")
 
 
 def _hop(frames_before: int, frames_after: int, v0: float, dt: float) -> tuple[np.ndarray, np.ndarray, int]:

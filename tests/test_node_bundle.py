@@ -16,7 +16,6 @@ a network or a GPU:
 from __future__ import annotations
 
 import importlib.metadata as md
-import importlib.util
 import json
 import os
 import shutil
@@ -28,17 +27,12 @@ from pathlib import Path
 
 import pytest
 
-from conftest import REPO, assert_one_line
+from conftest import REPO, assert_one_line, load_script
 
 MiB = 1 << 20
 
 
-def _load(name: str):
-    spec = importlib.util.spec_from_file_location(name, REPO / "scripts" / f"{name}.py")
-    mod = importlib.util.module_from_spec(spec)
-    sys.modules[name] = mod
-    spec.loader.exec_module(mod)
-    return mod
+_load = load_script
 
 
 nb = _load("node_bundle")

@@ -2,22 +2,16 @@
 
 from __future__ import annotations
 
-import importlib.util
-from pathlib import Path
-
 import numpy as np
 import torch
 
 from charctl.eval.tb import read_scalars
 
-SCRIPT = Path(__file__).resolve().parents[1] / "scripts" / "package_pretrained.py"
+from conftest import load_script
 
 
 def _load_script():
-    spec = importlib.util.spec_from_file_location("package_pretrained", SCRIPT)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    return load_script("package_pretrained")
 
 
 def test_thinned_indices_keep_first_and_last():
