@@ -10,7 +10,7 @@ from omegaconf import OmegaConf
 
 from charctl.experiments.cgail.config import EnvConfig, SkillConfig
 from charctl.experiments.cgail.env import CgailEnv
-from charctl.experiments.cgail.rules import reference_pose_error
+from charctl.experiments.cgail.rules import add_yaw_error, reference_pose_error
 from charctl.experiments.cgail.skills import load_skills
 
 needs_warp = pytest.mark.skipif(importlib.util.find_spec("mujoco_warp") is None, reason="needs MuJoCo Warp")
@@ -105,6 +105,50 @@ def test_a_root_height_radius_ends_a_jump_done_on_the_ground():
         err, _ = env._pose_error(grounded[None], env._reference_obs())
         assert err[0] == pytest.approx(0.2 * (0.5 / radius if radius else 1.0))
         assert bool(err[0] > env.pose_threshold) is ended
+
+
+def test_a_heading_radius_ends_a_spin_done_without_turning():
+    """reward.yaw_error_threshold: the spindance clip turns 2 pi per loop; its first pose held still (hands and
+    feet as the clip's, no turn) is ended once the missed yaw passes 1.5 rad, never with the radius off. The
+    simulated yaw rate is replaced by the held pose's 0 through `step`'s observation, so the count is exact:
+    the clip's own yaw rates summed frame by frame."""
+    skills = load_skills([SkillConfig("spindance", "dance_a")], 30.0)
+    w = skills[0].obs[:, 5]
+    missed = np.cumsum(w[1:]) / 30.0  # rad missed after each step from frame 0 (the reference runs on)
+    first = int(np.argmax(np.abs(missed) > 1.5))
+    assert 5 < first < 30  # within a second: the clip turns at 4.7 rad/s on average
+    for radius, ends_at in ((0.0, None), (1.5, first)):
+        cfg = OmegaConf.structured(EnvConfig(num_envs=1, switch_prob=0.0))
+        env = CgailEnv(skills, cfg, seed=0, pose_error_threshold=0.5, yaw_error_threshold=radius)
+        env.ref_frame[:] = 0
+        still = skills[0].obs[:1].copy()
+        still[:, 5] = 0.0
+        ended = None
+        for t in range(40):
+            ref, _ = env._advance_phase(restart=True)
+            err, _ = env._pose_error(skills[0].obs[env.ref_frame], ref)  # hands and feet on the reference
+            if env.yaw_scale > 0:
+                err, env.yaw_err = add_yaw_error(
+                    err, env.yaw_err, still, ref, env.ref_active, env.ref_grace, env.has_goal[env.cmd], 1 / 30.0,
+                    env.yaw_scale,
+                )
+            if err[0] > env.pose_threshold:
+                ended = t
+                break
+        assert ended == ends_at
+
+
+def test_step_applies_the_heading_radius():
+    """The env's step wires the heading check in: with a 10 m pose threshold nothing else can end the spin,
+    and a 0.1 mrad heading radius ends it at the first simulated step (the yaw rates never match that
+    closely); with the radius off it does not end."""
+    skills = load_skills([SkillConfig("spindance", "dance_a")], 30.0)
+    for radius, ended in ((0.0, False), (1e-4, True)):
+        cfg = OmegaConf.structured(EnvConfig(num_envs=2, switch_prob=0.0))
+        env = CgailEnv(skills, cfg, seed=0, pose_error_threshold=10.0, pose_error_grace_steps=0, yaw_error_threshold=radius)
+        res = env.step(np.zeros((2, 28)))
+        assert bool(res.pose_ended.all()) is ended and bool(res.terminated.all()) is ended
+        assert (env.yaw_err == 0).all()  # restarted at 0: ended envs were reset, the others never counted
 
 
 def test_episodes_that_leave_the_reference_end_without_counting_a_fall(skills):

@@ -57,6 +57,8 @@ def test_a_key_the_command_line_sets_is_not_dropped_but_refused():
         _compose("scale=small", "cgail.conditional=false", "disc.style_head=per_skill")
     with pytest.raises(CharctlError, match="root_height_threshold must be >= 0, and > 0 only with"):
         _compose("scale=small", "~reward.pose_error_threshold", "~reward.w_track", "reward.root_height_threshold=0.15")
+    with pytest.raises(CharctlError, match="yaw_error_threshold must be >= 0, and > 0 only with"):
+        _compose("scale=small", "~reward.pose_error_threshold", "~reward.w_track", "reward.yaw_error_threshold=1.5")
     with pytest.raises(CharctlError, match="pose_error_threshold > 0 needs reward.kind=adversarial"):
         _compose("scale=small", "use_skills=[walk]", "reward.kind=tracking", "reward.pose_error_threshold=0.3")
 

@@ -87,6 +87,30 @@ def test_root_height_threshold_scales_the_root_term_against_the_pose_threshold(a
     np.testing.assert_allclose(_np(rules.reference_pose_error(arr(obs), arr(ref))), [0.3, 0.3], atol=1e-12)
 
 
+@pytest.mark.parametrize("arr", LIBS)
+def test_yaw_error_adds_up_the_yaw_rate_missed_and_counts_against_the_pose_threshold(arr):
+    """Four envs, dt 0.1 s, pose threshold 0.5 m, heading radius 1.5 rad, the reference spinning at 5 rad/s:
+    env 0 stands still with 1.2 rad already missed (-1.7 rad, 1.7 / 3 = 0.567 m: above 0.5, ended); env 1 spins
+    with it (its 0.2 rad stay, 0.067 m under its hand's 0.1 m); env 2 is in grace steps and env 3 walks (a
+    heading goal): neither counts, their heading errors restart at 0."""
+    assert rules.yaw_scale(0.5, 1.5) == pytest.approx(1.0 / 3.0)
+    assert rules.yaw_scale(0.5, 0.0) == 0.0 and rules.yaw_scale(0.0, 1.5) == 0.0
+    obs, ref = np.zeros((4, 133)), np.zeros((4, 133))
+    ref[:, rules.OBS_YAW_RATE] = 5.0
+    obs[1, rules.OBS_YAW_RATE] = 5.0
+    err = np.array([0.1, 0.1, 0.1, 0.1])
+    yaw_err = np.array([-1.2, 0.2, -1.2, -1.2])
+    active = np.array([True, True, True, True])
+    grace = np.array([0, 0, 3, 0])
+    goal = np.array([False, False, False, True])
+    out, new = rules.add_yaw_error(
+        arr(err), arr(yaw_err), arr(obs), arr(ref), arr(active), arr(grace), arr(goal), 0.1, 0.5 / 1.5
+    )
+    # env 0: -1.2 + (0 - 5) x 0.1 = -1.7 rad -> 1.7 / 3 = 0.5667 m; env 1: 0.2 rad -> 0.0667 < 0.1 keeps 0.1
+    np.testing.assert_allclose(_np(new), [-1.7, 0.2, 0.0, 0.0], atol=1e-6)
+    np.testing.assert_allclose(_np(out), [1.7 / 3.0, 0.1, 0.1, 0.1], atol=1e-6)
+
+
 def test_state_width():
     assert rules.state_dim(False) == 243 and rules.state_dim(True) == 245
 

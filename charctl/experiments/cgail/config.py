@@ -112,6 +112,12 @@ class RewardConfig:
     # is ended at the clip's flight. 0 = the root height counts against pose_error_threshold like a hand or foot.
     # Needs pose_error_threshold > 0. docs/cgail.md, "Flight".
     root_height_threshold: float = 0.0
+    # Heading radius (rad) of the pose-error check: > 0 ends an episode also where the character's yaw has drifted
+    # from its timed reference's by more than this, summed over the reference's checked steps (rules.add_yaw_error;
+    # skills without a heading goal only). The pose check compares hands and feet in the heading frame, so a spin
+    # done without turning passes it; the spins turn 2*pi per loop (4.7-5.7 rad/s), the kicks 2.1 rad.
+    # 0 = off. Needs pose_error_threshold > 0. docs/cgail.md, "Flight".
+    yaw_error_threshold: float = 0.0
     # Weight w_T of a DeepMimic tracking reward (env.tracking_reward, in [0, 1]) against the pose-error check's
     # reference (the timed frame of a non-looping clip, the closest frame of a looping one), added to eq 4.1
     # where the reference is checked (0 during ramps and grace steps). Needs pose_error_threshold > 0.
@@ -218,6 +224,7 @@ class Config(BaseConfig):
                 "reward.low_style_threshold",
                 "reward.pose_error_threshold",
                 "reward.root_height_threshold",
+                "reward.yaw_error_threshold",
                 "reward.w_track",
             ]
         return keys
@@ -261,6 +268,8 @@ def _check_rewards(cfg) -> str | None:
         return "reward.pose_error_threshold > 0 needs reward.kind=adversarial"
     if r.root_height_threshold < 0 or (r.root_height_threshold > 0 and r.pose_error_threshold <= 0):
         return "reward.root_height_threshold must be >= 0, and > 0 only with reward.pose_error_threshold > 0"
+    if r.yaw_error_threshold < 0 or (r.yaw_error_threshold > 0 and r.pose_error_threshold <= 0):
+        return "reward.yaw_error_threshold must be >= 0, and > 0 only with reward.pose_error_threshold > 0"
     if r.w_track < 0 or (r.w_track > 0 and r.pose_error_threshold <= 0):
         return "reward.w_track must be >= 0, and > 0 only with reward.pose_error_threshold > 0 (its reference)"
     n_skills = len(cfg.use_skills) if cfg.use_skills else len(cfg.skills)

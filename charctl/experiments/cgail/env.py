@@ -29,6 +29,7 @@ from charctl.experiments.cgail.features import (
     sim_kinematics,
 )
 from charctl.experiments.cgail.rules import (
+    add_yaw_error,
     advance_ramp,
     advance_reference,
     checked_tracking_reward,
@@ -48,6 +49,7 @@ from charctl.experiments.cgail.rules import (
     switch_commands,
     tracking_reward,
     update_fall_rates,
+    yaw_scale,
 )
 from charctl.experiments.cgail.skills import SkillData
 from charctl.motion import rotations as R
@@ -79,6 +81,7 @@ class CgailEnv:
         pose_error_threshold: float = 0.0,
         pose_error_grace_steps: int = 10,
         root_height_threshold: float = 0.0,
+        yaw_error_threshold: float = 0.0,
         reference_reward: bool = False,
     ):
         self.skills = skills
@@ -86,6 +89,7 @@ class CgailEnv:
         # training only (reward.pose_error_threshold): end episodes that leave the clip's timed reference
         self.pose_threshold, self.pose_grace = float(pose_error_threshold), int(pose_error_grace_steps)
         self.root_scale = root_height_scale(self.pose_threshold, float(root_height_threshold))
+        self.yaw_scale = yaw_scale(self.pose_threshold, float(yaw_error_threshold))  # 0: no heading check
         self.reference_reward = bool(reference_reward)  # r_track against that reference (reward.w_track)
         self.cfg = env_cfg = plain_section(env_cfg)  # typed fields, cheap reads in the step loop
         # env.phase_obs: the timed reference's phase in the state of the adversarial policy (training and evaluation)
@@ -114,6 +118,7 @@ class CgailEnv:
         self.ref_frame = np.zeros(self.N, dtype=np.int64)  # reference clip frame at the current phase
         self.ref_active = np.ones(self.N, dtype=bool)  # pose-error check: reference valid (off during a switch)
         self.ref_grace = np.zeros(self.N, dtype=np.int64)  # pose-error check: steps left without a check
+        self.yaw_err = np.zeros(self.N)  # reward.yaw_error_threshold: heading gained on the reference (rad)
         self.clip_frames = np.array([len(sk.obs) for sk in skills])
         self.clip_loops = np.array([sk.loop for sk in skills])
         self.state_dim = state_dim(tracking or self.phase_obs)
@@ -172,6 +177,7 @@ class CgailEnv:
         self.steps[ids] = 0
         self.ref_active[ids] = True
         self.ref_grace[ids] = 0
+        self.yaw_err[ids] = 0.0
         qpos = np.empty((len(ids), self.sim.layout.nq))
         qvel = np.empty((len(ids), self.sim.layout.nv))
         for k in np.unique(skill):  # <= K groups, vectorised inside
@@ -287,6 +293,11 @@ class CgailEnv:
         pose_ended = np.zeros(self.N, dtype=bool)
         if self.pose_threshold > 0:
             err, scored = self._pose_error(pair_next, ref)
+            if self.yaw_scale > 0:  # reward.yaw_error_threshold: the heading gained on the reference
+                err, self.yaw_err = add_yaw_error(
+                    err, self.yaw_err, pair_next, ref, self.ref_active, self.ref_grace, self.has_goal[self.cmd],
+                    1.0 / self.cfg.control_hz, self.yaw_scale,
+                )
             checked, pose_ended = pose_check(self.ref_active, self.ref_grace, fell, unstable, err, self.pose_threshold)
             if self.reference_reward:  # reward.w_track: the tracking reward where the reference is checked
                 r_track = checked_tracking_reward(pair_next, scored, checked)

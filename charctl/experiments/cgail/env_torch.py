@@ -33,6 +33,7 @@ from charctl.experiments.cgail.features import (
     policy_state,
 )
 from charctl.experiments.cgail.rules import (
+    add_yaw_error,
     advance_ramp,
     advance_reference,
     checked_tracking_reward,
@@ -52,6 +53,7 @@ from charctl.experiments.cgail.rules import (
     switch_commands,
     tracking_reward,
     update_fall_rates,
+    yaw_scale,
 )
 from charctl.experiments.cgail.skills import SkillData
 from charctl.experiments.cgail.warp_kinematics import sim_kinematics
@@ -98,6 +100,7 @@ class CgailDeviceEnv:
         pose_error_threshold: float = 0.0,
         pose_error_grace_steps: int = 10,
         root_height_threshold: float = 0.0,
+        yaw_error_threshold: float = 0.0,
         reference_reward: bool = False,
         device: str | torch.device = "cpu",
         sim=None,
@@ -110,6 +113,7 @@ class CgailDeviceEnv:
         # as CgailEnv: the pose-error check against the clip's timed reference, r_track there, env.phase_obs
         self.pose_threshold, self.pose_grace = float(pose_error_threshold), int(pose_error_grace_steps)
         self.root_scale = root_height_scale(self.pose_threshold, float(root_height_threshold))
+        self.yaw_scale = yaw_scale(self.pose_threshold, float(yaw_error_threshold))  # 0: no heading check
         self.reference_reward = bool(reference_reward)
         self.phase_obs = bool(getattr(env_cfg, "phase_obs", False)) and not tracking
         self.timed_reference = self.pose_threshold > 0 or self.phase_obs  # reference advanced, restarting at frame 0
@@ -138,6 +142,7 @@ class CgailDeviceEnv:
         self.ref_frame = torch.zeros(self.N, **i64)  # reference clip frame at the current phase
         self.ref_active = torch.ones(self.N, dtype=torch.bool, device=dev)  # reference valid (off during a switch)
         self.ref_grace = torch.zeros(self.N, **i64)  # pose-error check: steps left without a check
+        self.yaw_err = torch.zeros(self.N, **f32)  # reward.yaw_error_threshold: heading gained on the reference (rad)
         self.fall_rate = torch.full((self.K,), 0.5, dtype=torch.float64, device=dev)  # env.skill_fall_weight
         self.forced_command: torch.Tensor | None = None  # evaluation: fixed command per env (-1 = random)
         self.start_frame: int | None = None
@@ -226,6 +231,7 @@ class CgailDeviceEnv:
         self.ref_frame = torch.where(mask, frames, self.ref_frame)
         self.ref_active = self.ref_active | mask
         self.ref_grace = torch.where(mask, torch.zeros_like(self.ref_grace), self.ref_grace)
+        self.yaw_err = torch.where(mask, torch.zeros_like(self.yaw_err), self.yaw_err)
         k = sim_kinematics(self.sim)
         self._new_goal(mask, k.body_rot[:, 0])
         m = mask[:, None]
@@ -308,6 +314,11 @@ class CgailDeviceEnv:
         pose_ended = no_pose_end
         if self.pose_threshold > 0:
             err, scored = self._pose_error(pair_next, ref)
+            if self.yaw_scale > 0:  # reward.yaw_error_threshold: the heading gained on the reference
+                err, self.yaw_err = add_yaw_error(
+                    err, self.yaw_err, pair_next, ref, self.ref_active, self.ref_grace, self.has_goal[self.cmd],
+                    1.0 / self.cfg.control_hz, self.yaw_scale,
+                )
             checked, pose_ended = pose_check(self.ref_active, self.ref_grace, fell, unstable, err, self.pose_threshold)
             if self.reference_reward:  # reward.w_track: the tracking reward where the reference is checked
                 r_track = checked_tracking_reward(pair_next, scored, checked)

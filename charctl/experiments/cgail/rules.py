@@ -34,6 +34,7 @@ def state_dim(phase: bool) -> int:
 # of the pose, velocity, end-effector and root ("COM") terms. See docs/cgail.md, "Tracking baseline".
 TRACK_WEIGHTS = {"pose": 0.65, "vel": 0.1, "ee": 0.15, "root": 0.1}
 TRACK_SCALES = {"pose": 1.0, "vel": 0.1, "ee": 40.0, "root_height": 10.0, "root_vel": 1.0}
+OBS_YAW_RATE = 5  # column of o: the root's angular velocity about +y (rad/s; the heading frame's y is world up)
 # slices of o: root height, root linear velocity, joint rotations (12x6), body velocities (14x3), end effectors (4x3)
 OBS_ROOT_H, OBS_ROOT_V, OBS_ROT, OBS_VEL, OBS_EE = (
     slice(0, 1),
@@ -100,6 +101,42 @@ def root_height_scale(pose_threshold: float, root_height_threshold: float) -> fl
     if root_height_threshold <= 0 or pose_threshold <= 0:
         return 1.0
     return pose_threshold / root_height_threshold
+
+
+def yaw_scale(pose_threshold: float, yaw_threshold: float) -> float:
+    """The factor (m/rad) that turns reward.yaw_error_threshold's heading error into a pose error:
+    pose_threshold / yaw_threshold, so that the scaled error exceeds pose_threshold exactly when the heading
+    error exceeds yaw_threshold (rad); 0 when either is 0 (off)."""
+    if yaw_threshold <= 0 or pose_threshold <= 0:
+        return 0.0
+    return pose_threshold / yaw_threshold
+
+
+def add_yaw_error(
+    err: Array,
+    yaw_err: Array,
+    obs: Array,
+    ref: Array,
+    ref_active: Array,
+    ref_grace: Array,
+    has_goal: Array,
+    dt: float,
+    scale: float,
+) -> tuple[Array, Array]:
+    """(pose error (N,) m, heading error (N,) rad) after one control step of reward.yaw_error_threshold.
+
+    The heading error is the yaw (rad about +y) the character has gained on its timed reference over
+    consecutive counted steps: yaw_err + (w_y - w*_y) dt, with w_y the root's yaw rate in the disc
+    observations `obs` and `ref` (N, 133) (rad/s) and `dt` the control step (s). A step counts where the
+    reference runs (`ref_active`), out of its grace steps (`ref_grace` == 0) and the commanded skill has no
+    heading goal (`has_goal` false: a walk turns to its goal, not with its clip); elsewhere the error
+    restarts at 0. A spin left out adds up; one done a moment late does not. The pose error `err` becomes
+    max(err, `scale` |yaw_err|) (`yaw_scale`), so one comparison with the pose threshold checks both."""
+    xp = namespace(err, obs, ref)
+    counted = ref_active & (ref_grace == 0) & ~has_goal
+    grown = yaw_err + (obs[:, OBS_YAW_RATE] - ref[:, OBS_YAW_RATE]) * dt
+    yaw_err = xp.where(counted, grown, xp.zeros_like(grown))
+    return xp.maximum(err, scale * xp.abs(yaw_err)), yaw_err
 
 
 def goal_features(goal_angle: Array, heading: Array, has_goal: Array) -> Array:

@@ -56,6 +56,7 @@ class CgailLearner(AgentCounters):
             pose_error_threshold=cfg.reward.pose_error_threshold,
             pose_error_grace_steps=cfg.reward.pose_error_grace_steps,
             root_height_threshold=cfg.reward.root_height_threshold,
+            yaw_error_threshold=cfg.reward.yaw_error_threshold,
             reference_reward=cfg.reward.w_track > 0,
         )
         if self.backend == "warp":  # MuJoCo Warp on the same device: rollout never leaves it
