@@ -5,16 +5,23 @@ the normaliser, the simulator or the networks that keeps every shape still fails
 For each skill: RSI at clip frames 0 and the clip's middle, heading 0, command held; the pin holds the
 policy state s (243 or 245 values) at reset, the mean action there, and the state after
 `PIN_STEPS` control steps of mean actions (so the physics and the feature code are pinned together).
+`pin_actions` gives the mean actions on stored states (the normaliser and networks pinned apart from the
+features), `stay_up_rollout` a short rollout of every skill that the test checks for falls and root height.
 """
 
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
+if TYPE_CHECKING:
+    from charctl.experiments.cgail.policy import TrainedRun
+
 PIN_FILE = "pin.npz"
 PIN_STEPS = 10
+STAY_UP_SECONDS = 2.0  # stay_up_rollout: 60 control steps at 30 Hz
 
 
 def compute_pins(run_dir: str | Path) -> dict[str, np.ndarray]:
@@ -27,7 +34,7 @@ def compute_pins(run_dir: str | Path) -> dict[str, np.ndarray]:
     K = len(tr.agent.skills)
     frames = np.array([[0, len(s.qpos) // 2] for s in tr.agent.skills]).reshape(-1)
     env = tr.make_env(2 * K, seed=0, switch_prob=0.0, episode_seconds=60.0)
-    env.forced_command = np.repeat(np.arange(K), 2)
+    env.forced_command = pin_commands(K)
     env.random_yaw = False
     env.reset(np.arange(2 * K))
     # per-env start frames: reset each pair of envs from its own frames
@@ -45,6 +52,59 @@ def compute_pins(run_dir: str | Path) -> dict[str, np.ndarray]:
         "state0": state0,
         "action0": action0,
         "state_after": env.state.copy(),
+    }
+
+
+def pin_commands(K: int) -> np.ndarray:
+    """(K*2,) the command of each pinned state: skill k at rows 2k (clip frame 0) and 2k + 1 (the middle)."""
+    return np.repeat(np.arange(K), 2)
+
+
+def pin_actions(tr: TrainedRun, states: np.ndarray) -> np.ndarray:
+    """(K*2, 28) mean actions of `tr`'s policy on given policy states (K*2, S), e.g. a pin's stored state0,
+    with the pins' held commands (`pin_commands`, a one-hot blend): the normaliser and networks alone, no
+    simulator or feature code."""
+    from types import SimpleNamespace
+
+    from charctl.experiments.cgail.drive import mean_action
+
+    K = len(tr.agent.skills)
+    blend = np.eye(K)[pin_commands(K)]
+    assert len(states) == len(blend), f"{len(states)} states for {K} skills ({len(blend)} expected)"
+    # drive.mean_action reads only the env's state and its command blend
+    return mean_action(tr.agent, SimpleNamespace(state=np.asarray(states), command_blend=lambda: blend))
+
+
+def stay_up_rollout(tr: TrainedRun, seconds: float = STAY_UP_SECONDS) -> dict[str, np.ndarray]:
+    """`seconds` of control of every skill of `tr` at once, one env per skill, as the fidelity evaluation
+    starts them (fidelity._make_env): the skill commanded and held, RSI at the clip's frame 0, heading 0,
+    mean actions (`drive.policy_steps`). An episode that ends by a non-looping clip's end (the tracking
+    baseline truncates there) restarts at frame 0 and goes on. Returns {"skills", "terminated" (K,) bool: a
+    fall (a non-foot body on the ground) or a simulator blow-up ended an episode, "unstable" (K,) bool:
+    a blow-up, "min_root_height" (K,) m: the lowest root height at any control step, "clip_min_root_height"
+    (K,) m: each skill's clip's lowest}."""
+    from charctl.experiments.cgail.drive import policy_steps
+
+    K = len(tr.agent.skills)
+    env = tr.make_env(K, seed=0, switch_prob=0.0, episode_seconds=60.0)
+    env.forced_command = np.arange(K)
+    env.random_yaw = False
+    env.start_frame = 0
+    env.reset(np.arange(K))
+    terminated = np.zeros(K, dtype=bool)
+    unstable = np.zeros(K, dtype=bool)
+    low = env.sim.qpos[:, 1].copy()  # y is up; qpos[:, :3] is the root position
+    for step in policy_steps(tr.agent, env, int(round(seconds * env.cfg.control_hz))):
+        terminated |= step.result.terminated
+        unstable |= step.result.unstable
+        # after the step's resets: a terminated env's last height is lost, but it failed already
+        low = np.minimum(low, env.sim.qpos[:, 1])
+    return {
+        "skills": np.array(tr.skill_names),
+        "terminated": terminated,
+        "unstable": unstable,
+        "min_root_height": low,
+        "clip_min_root_height": np.array([s.qpos[:, 1].min() for s in tr.agent.skills]),
     }
 
 
