@@ -1,5 +1,5 @@
 """Evaluation output shared by the experiments: tables (terminal, Markdown and CSV), JSON, and a report.md
-that each evaluation mode appends its table to.
+that each evaluation mode appends its table to (or that an evaluation writes whole, `write_report`).
 
     rows = {"walk": {"error": 0.12, "falls": 0}, "run": {"error": 0.3, "falls": 1}}   # name -> column -> value
     markdown_table(rows, ["error", "falls"])       # | | error | falls |  ...  (cells: fmt_cell)
@@ -7,6 +7,7 @@ that each evaluation mode appends its table to.
     write_csv(out / "t.csv", rows, ["error", "falls"], index="skill")
     write_json(out / "t.json", {"table": rows})    # numpy values converted, NaN / inf -> null
     append_report(out, "Title", markdown_table(rows, cols), "how it was measured", header="# my report\n")
+    write_report(out, "# my report\n\n...")        # out/report.md replaced by the whole text
 """
 
 from __future__ import annotations
@@ -124,3 +125,16 @@ def append_report(
             fh.write(f"\n## {title}\n\n{body}\n")
             if note:
                 fh.write(f"\n_{note}_\n")
+
+
+def write_report(out: Path, text: str) -> Path:
+    """Write out/report.md as exactly `text`, atomically, replacing any earlier report there; returns its path.
+
+    For an evaluation that renders its report in one piece (srb `--push`, com-cnn `--pose-error`), so a
+    re-run gives the new report alone. `append_report` is for a report built a section per evaluation
+    mode (cgail), where a re-run adds its sections after the earlier ones."""
+    from charctl.files import atomic_write_text
+
+    path = Path(out) / "report.md"
+    atomic_write_text(path, text)
+    return path

@@ -100,7 +100,7 @@ def encode_frames(clip: Clip) -> np.ndarray:
     for joint, col, width in LAYOUT:
         q = clip.local_rot[:, skel.index(joint)]
         if width == 1:
-            out[:, col] = 2.0 * np.arctan2(q[:, 2], q[:, 3])
+            out[:, col] = R.twist_angle(q, 2)  # the hinge angle about +z
             out[:, col] = (out[:, col] + np.pi) % (2 * np.pi) - np.pi
         else:
             out[:, col : col + 4] = wxyz(q)

@@ -149,12 +149,14 @@ def foot_sliding(clip, side: str, height: float = CONTACT_CM / 100.0) -> tuple[n
 
 
 def _limit_violations(clip) -> tuple[int, float]:
+    from charctl.motion import rotations as R
+
     sk = clip.skeleton
     bad = np.zeros(clip.num_frames, dtype=bool)
     worst = 0.0
     for b in ("right_knee", "left_knee", "right_elbow", "left_elbow"):
         q = clip.local_rot[:, sk.index(b)]
-        angle = np.degrees(2.0 * np.arctan2(q[:, 2], q[:, 3]))
+        angle = np.degrees(R.twist_angle(q, 2))  # the hinge angle about +z
         angle = (angle + 180.0) % 360.0 - 180.0
         lo, hi = HINGE_RANGES_DEG[b.split("_")[1]]
         over = np.maximum(lo - angle, 0.0) + np.maximum(angle - hi, 0.0)

@@ -156,6 +156,20 @@ def yaw_about_y(q: np.ndarray, forward: np.ndarray = X_AXIS) -> np.ndarray:
     return np.arctan2(-f[..., 2], f[..., 0])
 
 
+def twist_angle(q: np.ndarray, axis: int) -> np.ndarray:
+    """Twist angle (radians) of (..., 4) x-y-z-w quaternions about coordinate axis `axis` (0 = x, 1 = y,
+    2 = z): 2 atan2(q[axis], q_w), in [-2 pi, 2 pi] and not wrapped (callers wrap as they need).
+
+    The angle of the twist in the swing-twist decomposition q = twist * swing (or swing * twist: same
+    twist), twist a rotation about the axis and swing one about an axis perpendicular to it. For a
+    hinge joint, whose rotation is about that axis only, it is the hinge angle: a quaternion
+    from_axis_angle(e_axis, a) gives back a for a in (-2 pi, 2 pi]. The axis is a component index, not a
+    vector, so that this is exactly the formula: a dot product with a unit vector would turn a -0.0
+    component into +0.0, and atan2 gives +pi there instead of -pi when q_w < 0.
+    """
+    return 2.0 * np.arctan2(q[..., axis], q[..., 3])
+
+
 def heading_quat(theta: np.ndarray) -> np.ndarray:
     """Quaternion of a rotation by theta (radians) about world +y."""
     return from_axis_angle(np.array([0.0, 1.0, 0.0]), theta)

@@ -3,7 +3,7 @@
 Same conventions: quaternions are scalar-last x-y-z-w, shape (..., 4), unit norm; rotations are
 active and right-handed, angles in radians, world y-up. Every function broadcasts over leading
 dimensions and runs on whatever device and dtype its inputs have (no host round trip).
-`tests/test_gpu_path.py` holds each one equal to its numpy twin.
+`tests/test_gpu_path.py` holds each one equal to its numpy twin (`cross`: `tests/test_rotations.py`).
 """
 
 from __future__ import annotations
@@ -29,6 +29,19 @@ def multiply(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
 def conjugate(q: torch.Tensor) -> torch.Tensor:
     """Inverse of unit quaternions (..., 4)."""
     return torch.cat([-q[..., :3], q[..., 3:]], dim=-1)
+
+
+def cross(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
+    """Cross product a x b of (..., 3) vectors along the last axis (broadcasting), as `rotations.cross`.
+
+    Written out by components (unbind, then stack of products and differences), not `torch.cross`:
+    the cgail web graph (`cgail/web_graph.py`) calls it and is exported to ONNX, and these plain
+    element-wise ops export to the same graph under every exporter and opset, with no dependence on
+    a cross-product symbolic (the TorchScript exporter's `aten::cross` is two Rolls per operand).
+    """
+    ax, ay, az = a.unbind(-1)
+    bx, by, bz = b.unbind(-1)
+    return torch.stack([ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx], dim=-1)
 
 
 def rotate(q: torch.Tensor, v: torch.Tensor) -> torch.Tensor:

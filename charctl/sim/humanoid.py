@@ -243,7 +243,7 @@ def local_rot_to_qpos(root_pos: np.ndarray, local_rot: np.ndarray) -> np.ndarray
             qpos[..., lay.qpos_slices[b]] = angles[..., k, :]
     for b in HINGE_JOINTS:
         q = local_rot[..., skel.index(b), :]
-        qpos[..., lay.qpos_slices[b].start] = 2.0 * np.arctan2(q[..., 2], q[..., 3])
+        qpos[..., lay.qpos_slices[b].start] = R.twist_angle(q, 2)  # the hinge angle about +z
     return qpos
 
 

@@ -129,11 +129,20 @@ class CgailDeviceEnv:
         )
         self.device = dev = self.sim.device
         self.max_steps = int(round(env_cfg.episode_seconds * env_cfg.control_hz))
+        self._load_skill_tables(skills)
+        self.rest = torch.zeros(self.sim.layout.nu, dtype=torch.float32, device=dev)
+        self.state_dim = state_dim(tracking or self.phase_obs)
+        self.obs_dim = self.state_dim
+        self._init_env_state()
+        self.reset(torch.ones(self.N, dtype=torch.bool, device=dev))
+
+    def _init_env_state(self) -> None:
+        """The per-env state on the device before the first reset: commands, ramp weights, step counts,
+        heading goals, reference frames and checks, fall rates per skill, evaluation overrides, and
+        the state / observation buffers (zeros; `reset` of every env fills them)."""
+        dev = self.device
         f32 = dict(dtype=torch.float32, device=dev)
         i64 = dict(dtype=torch.long, device=dev)
-        self._load_skill_tables(skills)
-        self.rest = torch.zeros(self.sim.layout.nu, **f32)
-        # per-env state
         self.cmd = torch.zeros(self.N, **i64)  # B: current command
         self.prev_cmd = torch.zeros(self.N, **i64)  # A: previous command
         self.w = torch.ones(self.N, **f32)  # ramp weight
@@ -147,12 +156,9 @@ class CgailDeviceEnv:
         self.forced_command: torch.Tensor | None = None  # evaluation: fixed command per env (-1 = random)
         self.start_frame: int | None = None
         self.random_yaw = True
-        self.state_dim = state_dim(tracking or self.phase_obs)
-        self.obs_dim = self.state_dim
         self._falls = torch.zeros((), **i64)
         self._state = torch.zeros(self.N, self.state_dim, **f32)
         self._obs = torch.zeros(self.N, DISC_OBS_DIM, **f32)
-        self.reset(torch.ones(self.N, dtype=torch.bool, device=dev))
 
     def _load_skill_tables(self, skills: list[SkillData]) -> None:
         """Per-skill tables on the device: RSI states and reference observations (padded to the longest clip

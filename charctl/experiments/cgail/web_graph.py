@@ -68,13 +68,6 @@ OUTPUTS = ("ctrl", "state", "command", "obs", "probs", "style", "fell")
 _SPHERE, _CAPSULE, _BOX = 2, 3, 6
 
 
-def _cross(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
-    """a x b over the last axis (written out: one graph for every exporter)."""
-    ax, ay, az = a.unbind(-1)
-    bx, by, bz = b.unbind(-1)
-    return torch.stack([ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx], dim=-1)
-
-
 def mujoco_kinematics(
     xpos: torch.Tensor,
     xquat: torch.Tensor,
@@ -93,9 +86,9 @@ def mujoco_kinematics(
     cv = cvel[:, body_ids]
     ang, lin_c = cv[..., :3], cv[..., 3:]
     com = subtree_com[:, 1]
-    lin = lin_c + _cross(ang, pos - com[:, None])
+    lin = lin_c + RT.cross(ang, pos - com[:, None])
     offset = RT.rotate(rot, com_local.expand(pos.shape))  # body COM - frame origin, world
-    com_vel = ((lin + _cross(ang, offset)) * masses[None, :, None]).sum(1) / total_mass
+    com_vel = ((lin + RT.cross(ang, offset)) * masses[None, :, None]).sum(1) / total_mass
     return Kinematics(pos, rot, lin, ang, com, com_vel)
 
 

@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from charctl.errors import CharctlError
-from charctl.eval.report import write_json
+from charctl.eval.report import write_json, write_report
 from charctl.experiments.com_cnn.body import BodyModel
 from charctl.experiments.com_cnn.checkpoint import LoadedRun, load_run, resolve_targets
 from charctl.experiments.com_cnn.data import WindowSet, heading_frame
@@ -193,7 +193,7 @@ def evaluate(targets: list[str], options: dict, overrides: list[str]) -> dict:
         result["dtw"] = {p.name: dtw_errors(p, test_seqs, body, types) for p in preds}
     write_json(out_dir / "pose_error.json", result)
     report = render_report(result)
-    (out_dir / "report.md").write_text(report)
+    write_report(out_dir, report)
     print(report)
     print(f"wrote {out_dir / 'report.md'}")
     return result

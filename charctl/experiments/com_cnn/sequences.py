@@ -45,8 +45,7 @@ def heading_yaw(root_rot: np.ndarray, forward: np.ndarray) -> np.ndarray:
     psi = twist + the rest pose's facing angle. Unlike projecting the forward axis on the ground,
     this stays well defined when the pelvis pitches 90 degrees (crawling, getting up, flips).
     """
-    twist = 2.0 * np.arctan2(root_rot[..., 1], root_rot[..., 3])
-    return twist + np.arctan2(forward[0], forward[2])
+    return R.twist_angle(root_rot, 1) + np.arctan2(forward[0], forward[2])
 
 
 def canonical_start(root_pos, root_rot, forward):

@@ -15,6 +15,7 @@ import time
 from pathlib import Path
 
 from charctl.errors import CharctlError
+from charctl.eval.report import write_report
 from charctl.experiments import PushRollout, latest_run_dir, load, providers
 from charctl.experiments.srb.push import (
     PushTable,
@@ -107,7 +108,7 @@ def evaluate(targets: list[str], options: dict, overrides: list[str]) -> None:
     curve = run.dir / "training_curve.png"
     if curve.is_file() and out_dir.resolve() != run.dir.resolve():
         shutil.copyfile(curve, out_dir / "training_curve.png")
-    (out_dir / "report.md").write_text(report)
+    write_report(out_dir, report)
     print(md)
     print(f"wrote {out_dir / 'report.md'}, push.md, push.png, push.json ({time.perf_counter() - t0:.0f} s)")
 
