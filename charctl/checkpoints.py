@@ -40,9 +40,10 @@ def checkpoint_file_name(name: str | None) -> str:
     return name
 
 
-def kept_checkpoints(run_dir: str | Path, experiment: str) -> list[tuple[int, str]]:
+def kept_checkpoints(run_dir: str | Path, experiment: str, samples_key: str = "samples") -> list[tuple[int, str]]:
     """(samples, file name) of RUN/checkpoints/samples_*.pt and last.pt (unless it is one of those), by
-    sample count; last.pt's count is read from its state's "samples"."""
+    sample count; last.pt's count is read from its state's `samples_key` (the learner's sample count as
+    the shared runner names kept checkpoints by it: "samples", hopper-ga's "evaluations")."""
     run_dir = Path(run_dir)
     found = []
     for p in sorted((run_dir / "checkpoints").glob("samples_*.pt")):
@@ -51,7 +52,10 @@ def kept_checkpoints(run_dir: str | Path, experiment: str) -> list[tuple[int, st
             found.append((int(m.group(1)), p.name))
     last = run_dir / "checkpoints" / "last.pt"
     if last.is_file():
-        n = int(load_checkpoint(last, experiment)["samples"])
+        state = load_checkpoint(last, experiment)
+        if samples_key not in state:
+            raise CharctlError(f"{last}: its state holds no sample count ({samples_key!r})")
+        n = int(state[samples_key])
         if all(n != s for s, _ in found):
             found.append((n, "last.pt"))
     return sorted(found)

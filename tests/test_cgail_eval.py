@@ -177,3 +177,20 @@ def test_eval_checkpoints_picks_by_margin_and_lists_every_kept_checkpoint(smoke_
     assert charctl_main(*argv).returncode == 0  # same settings: the kept result is reused, nothing is evaluated again
     assert survival.stat().st_mtime_ns == before
     assert json.loads((src / "eval" / "checkpoints.json").read_text())["rows"] == report["rows"]
+
+
+def test_eval_checkpoints_ranks_an_amp_run_by_fidelity(smoke_runs, tmp_path, charctl_main):
+    """An AMP (unconditional) run has no classifier, so no Fig 6.8 diagonal; `--checkpoints` ranks its kept
+    checkpoints by fidelity (the default rank) and the table has no diagonal column."""
+    _, amp, _ = smoke_runs
+    out = tmp_path / "ck"
+    argv = ["eval", str(amp), "--checkpoints", "--survival", "0.5", "-k", "1", "--fidelity-k", "1", "-o", str(out)]
+    res = charctl_main(*argv)
+    assert res.returncode == 0, res.stdout + res.stderr
+    report = json.loads((out / "checkpoints.json").read_text())
+    (row,) = report["rows"]  # the smoke run keeps last.pt only
+    assert row["checkpoint"] == "last.pt" and row["diagonal"] is None and "margin" not in row
+    assert row["min_coverage"] == min(row["fidelity"]["coverage"].values())
+    assert report["chosen"]["checkpoint"] == "last.pt" and report["confirm"]["seed"] == 7
+    md = (out / "checkpoints.md").read_text()
+    assert "| samples | worst no-fall | min coverage |" in md and "diagonal |" not in md

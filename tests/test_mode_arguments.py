@@ -40,12 +40,14 @@ MODES = [
     ("eval-srb-push", "eval {srb} --push -k 1 -o {out} push.baseline_run={tmp}/nosuch", ["nosuch"]),
     ("eval-com-cnn-pose-error", "eval {com} --pose-error -o {out} data.test_clips=[]", ["held-out"]),
     ("eval-com-cnn-dtw", "eval {com} --dtw -o {out} nosuch.key=1", ["nosuch"]),
+    ("eval-com-cnn-checkpoints", "eval {com} --checkpoints --after 1e12 -o {out}", ["no checkpoint", "1,000,000,000"]),
     (
         "eval-mm-sweep",
         "eval motion-matching --sweep scale=smoke sweep.cases=[99] output_root={tmp}/runs -o {out}",
         ["sweep.cases", "99"],
     ),
     ("eval-hopper-curves", "eval {hopper} {hopper_bare} --curves -o {out}", ["no checkpoint"]),
+    ("eval-hopper-checkpoints", "eval {hopper_bare} --checkpoints -o {out}", ["no checkpoint to evaluate"]),
     # export: clips
     ("export-clip-bvh", "export bvh nosuch_clip -o {out}/w.bvh", ["nosuch_clip"]),
     ("export-clip-video", "export video walk --fps 0 -o {out}/w.mp4", ["--fps"]),

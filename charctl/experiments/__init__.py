@@ -17,7 +17,8 @@ references, imported only when called:
 `charctl eval` / `charctl export`; the CLI builds each experiment's option set from them.
 `charctl eval RUN --checkpoints` evaluates every kept checkpoint of a run and picks one: the loop,
 the choice and its confirmation on fresh starts are the command's (charctl/commands/eval_checkpoints.py),
-what is measured per checkpoint and how it is ranked the experiment's `checkpoints` entry point.
+what is measured per checkpoint and how it is ranked the experiment's `checkpoints` entry point
+(charctl/eval/checkpoints.py: what the entry points share, and the evaluation by one deterministic number).
 `provides` names optional capabilities another experiment may use through the registry (never by
 importing the provider), e.g. cgail's `push_rollout` is srb's full-body push baseline.
 `tune_metrics` names the scalars the experiment logs as it trains (TensorBoard names, or
@@ -129,22 +130,28 @@ class PushRollout(Protocol):
 class CheckpointEvaluation(Protocol):
     """What an experiment's `checkpoints` entry point returns for `charctl eval RUN --checkpoints`: built
     from the command's targets, options and overrides, every one of them checked (nothing is written
-    before it returns). The command evaluates each kept checkpoint with `evaluate`, picks the largest
-    `rank_key`, evaluates that one again with `confirm_seed`, writes checkpoints.json and calls `write_report`."""
+    before it returns). The command lists the kept checkpoints, `check`s that every one of them loads
+    (still writing nothing), evaluates each with `evaluate`, picks the largest `rank_key`, evaluates that
+    one again with `confirm_seed` (unless it is None), writes checkpoints.json and calls `write_report`.
+    `charctl.eval.checkpoints.ScalarCheckpoints` is one for a single deterministic number."""
 
     run_dir: Path  # the run whose checkpoints/ are evaluated
     out: Path  # folder of the results: out/<checkpoint stem>/, out/checkpoints.*
-    seed: int  # starts of the selection evaluation
-    confirm_seed: int  # fresh starts of the chosen checkpoint's second evaluation
+    samples_key: str  # the key of a checkpoint state's sample count (last.pt's place among the kept ones)
+    seed: int | None  # starts of the selection evaluation (None: a deterministic evaluation draws none)
+    confirm_seed: int | None  # fresh starts of the chosen checkpoint's second evaluation (None: no second one)
 
-    def evaluate(self, name: str, samples: int, out: Path, seed: int, confirm: bool = False) -> dict:
+    def check(self, name: str) -> None:
+        """Load checkpoint file `name` as `evaluate` will (a one-line CharctlError if it cannot); writes nothing."""
+
+    def evaluate(self, name: str, samples: int, out: Path, seed: int | None, confirm: bool = False) -> dict:
         """The row of checkpoint file `name` (`samples` samples), its files in `out` (reused when unchanged);
         it names "checkpoint" and "samples"."""
 
     def rank_key(self, row: dict) -> tuple:
         """Sort key of a row under the chosen selection rule (larger is better)."""
 
-    def write_report(self, rows: list[dict], chosen: dict, confirm: dict) -> str:
+    def write_report(self, rows: list[dict], chosen: dict, confirm: dict | None) -> str:
         """Write the table and figures beside checkpoints.json; returns the table's text."""
 
 
@@ -246,8 +253,8 @@ FPS = Option("fps", "resample to this frame rate", float)
 # `charctl eval RUN --checkpoints` (an experiment with a `checkpoints` entry point declares these)
 CHECKPOINTS = Option(
     "checkpoints",
-    "evaluate every kept checkpoint of the run (train.keep_checkpoint_every, and last.pt), pick one by --rank "
-    "and evaluate it again on fresh starts: RUN/eval/checkpoints.{json,md,png}; re-runs evaluate new ones only",
+    "evaluate every kept checkpoint of the run (train.keep_checkpoint_every, and last.pt) and pick the best: "
+    "RUN/eval/checkpoints.{json,md,png}; re-runs evaluate new ones only",
     mode=True,
 )
 AFTER = Option("after", "with --checkpoints: skip checkpoints before this many samples", float, requires="checkpoints")

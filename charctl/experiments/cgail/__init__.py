@@ -58,7 +58,8 @@ EXPERIMENT = Experiment(
         Option(
             CHECKPOINTS.name,
             CHECKPOINTS.help + "; per checkpoint: no-fall over -k (default 64) episodes of --survival SECONDS "
-            "(default 5) per skill, the Fig 6.8 diagonal and, with --fidelity or --rank fidelity, fidelity",
+            "(default 5) per skill, the Fig 6.8 diagonal (not for an AMP run) and, with --fidelity or --rank "
+            "fidelity, fidelity; picks one by --rank and evaluates it again on fresh starts",
             mode=True,
         ),
         Option(

@@ -27,6 +27,10 @@ that meets both targets with the largest margin (the smaller of worst no-fall - 
 diagonal - min_diagonal), else the one closest to meeting them. Each checkpoint's result is kept in
 OUT/<checkpoint>/row.json and reused while its settings match. Policies run on the CPU unless a
 `device=` override says otherwise.
+
+An AMP (unconditional) run has no classifier, so no diagonal: its checkpoints are ranked by fidelity
+(the rollouts force each skill's clip at the reset, which an AMP policy follows without a command), ties
+broken by the worst no-fall; `--rank margin`, `--confusion-k` and `--min-diagonal` are refused for it.
 """
 
 from __future__ import annotations
@@ -48,6 +52,7 @@ MIN_DIAGONAL = 0.9
 SEED = 4321
 CONFIRM_SEED = 7
 OTHER_MODES = ("dtw", "confusion", "switch", "curves")  # modes --checkpoints does not combine with
+CLASSIFIER_OPTIONS = ("confusion_k", "min_diagonal")  # options of the Fig 6.8 diagonal (refused for an AMP run)
 
 
 def margin(worst_no_fall: float, min_diagonal: float, min_no_fall: float, min_diag: float) -> float:
@@ -58,7 +63,8 @@ def margin(worst_no_fall: float, min_diagonal: float, min_no_fall: float, min_di
 def rank_key(row: dict, rank: str) -> tuple:
     """Sort key of a checkpoint's row (larger is better) under selection rule `rank` (see the module doc)."""
     if rank == "fidelity":
-        return (row["min_coverage"], row["worst_no_fall"], row["min_diagonal"])
+        key = (row["min_coverage"], row["worst_no_fall"])
+        return key if row["min_diagonal"] is None else (*key, row["min_diagonal"])  # None: an AMP run
     return (row["margin"],)
 
 
@@ -96,8 +102,8 @@ def evaluate_checkpoint(
     row = cached_row(out, name, samples, seconds, k, ck, seed)
     tr = None
     if row is None:
+        tr = load_eval_run(run_dir, device, name)  # loaded before its folder is made
         out.mkdir(parents=True, exist_ok=True)
-        tr = load_eval_run(run_dir, device, name)
         row = survival_and_confusion(tr, name, seconds, k, ck, seed, out)
         atomic_write_text(out / "row.json", strict_json(row))
     wanted = {"k": fidelity_k, "seed": seed}
@@ -125,118 +131,147 @@ def evaluate_checkpoint(
 
 
 def survival_and_confusion(tr, name: str, seconds: float, k: int, ck: int, seed: int, out: Path) -> dict:
-    """The no-fall / diagonal row of one loaded checkpoint."""
+    """The no-fall / diagonal row of one loaded checkpoint (an AMP run's diagonal and class accuracy: None)."""
     from charctl.experiments.cgail.evaluate import eval_confusion, eval_survival
 
     surv = eval_survival([tr], k, seconds, out, seed=seed)
-    conf = eval_confusion(tr, ck, out, seed=seed + 1)
     no_fall = {s: row[f"{tr.label} no-fall"] for s, row in surv["table"].items()}
-    class_acc = {s: row[f"{tr.label} class acc"] for s, row in surv["table"].items()}
-    diagonal = dict(zip(conf["skills"], conf["policy_diagonal"]))
+    diagonal = class_acc = None
+    if tr.agent.conditional:
+        conf = eval_confusion(tr, ck, out, seed=seed + 1)
+        class_acc = {s: row[f"{tr.label} class acc"] for s, row in surv["table"].items()}
+        diagonal = dict(zip(conf["skills"], conf["policy_diagonal"]))
     row = {
         "checkpoint": name,
         "samples": int(tr.agent.samples),
         "no_fall": no_fall,
         "diagonal": diagonal,
         "worst_no_fall": min(no_fall.values()),
-        "min_diagonal": min(diagonal.values()),
+        "min_diagonal": _lowest(diagonal),
         "class_acc": class_acc,  # argmax == command on the no-fall test's pairs (a confusion matrix's diagonal)
-        "min_class_acc": min(class_acc.values()),
+        "min_class_acc": _lowest(class_acc),
         "seed": seed,
         "settings": {"seconds": seconds, "k": k, "confusion_k": ck, "seed": seed},
     }
     return row
 
 
+def _lowest(per_skill: dict[str, float] | None) -> float | None:
+    """The lowest value over the skills (None for None: an AMP run's classifier numbers)."""
+    return None if per_skill is None else min(per_skill.values())
+
+
 def write_report(run_dir: Path, rows: list[dict], chosen: dict | None, confirm: dict | None, a) -> str:
     """checkpoints.md and checkpoints.png in `a.out` (`a`: the settings, a `CgailCheckpoints`); returns the table."""
-    from charctl.files import atomic_write_text
+    from charctl.eval.checkpoints import write_checkpoints_md
 
-    out = a.out
     skills = list(rows[0]["no_fall"])
     fid = bool(a.fidelity)
     lines = _report_head(run_dir, skills, a, fid)
     lines += _report_table(rows, skills, a, fid).split("\n")
     lines.append("")
-    lines.append("Cells: no-fall / diagonal" + (" / coverage." if fid else "."))
+    lines.append("Cells: " + " / ".join(_cell_parts(a.conditional, fid)) + ".")
     if chosen is not None and confirm is not None:
         lines += _chosen_lines(chosen, confirm, fid)
-    atomic_write_text(out / "checkpoints.md", "\n".join(lines) + "\n")
-    _plot_checkpoints(run_dir, rows, a, fid, out / "checkpoints.png")
-    return "\n".join(lines)
+    text = write_checkpoints_md(a.out, lines)
+    _plot_checkpoints(run_dir, rows, a, fid, a.out / "checkpoints.png")
+    return text
+
+
+def _cell_parts(conditional: bool, fid: bool) -> list[str]:
+    """What a per-skill cell of the table shows: no-fall, the diagonal (a cGAIL run), coverage (with fidelity)."""
+    return ["no-fall", *(["diagonal"] if conditional else []), *(["coverage"] if fid else [])]
 
 
 def _report_head(run_dir: Path, skills: list[str], a, fid: bool) -> list[str]:
     """checkpoints.md's title, what the tests measure (episode lengths in s) and the selection rule."""
-    return [
-        f"# Kept checkpoints of {run_dir.name}",
-        "",
-        f"no-fall: {a.k} episodes of {a.seconds:g} s per skill; diagonal: Fig 6.8 mean P(commanded skill) over "
-        f"{a.confusion_k} episodes (RSI at frame 0, 3 s). Targets: no-fall >= {a.min_no_fall}, diagonal >= "
-        f"{a.min_diagonal}. Argmax acc.: the classifier's top class equals the command, on the pairs of the no-fall "
-        "test up to each episode's fall (the diagonal of a confusion matrix of predictions), for comparison. The "
-        "diagonal runs start at frame 0 with mean actions, so they are the same on every evaluation."
-        + (
-            f" Coverage: `charctl eval RUN --fidelity -k {a.fidelity_k}` (share of the clip's frames the policy "
-            'matches within 0.15 m at every body, docs/cgail.md "Fidelity"); min coverage: the lowest over the '
-            "skills."
-            if fid
-            else ""
-        ),
-        "Selection: the largest "
-        + ("min coverage, then worst no-fall, then min diagonal." if a.rank == "fidelity" else "margin."),
-        "",
-    ]
+    if a.conditional:
+        measured = (
+            f"no-fall: {a.k} episodes of {a.seconds:g} s per skill; diagonal: Fig 6.8 mean P(commanded skill) over "
+            f"{a.confusion_k} episodes (RSI at frame 0, 3 s). Targets: no-fall >= {a.min_no_fall}, diagonal >= "
+            f"{a.min_diagonal}. Argmax acc.: the classifier's top class equals the command, on the pairs of the "
+            "no-fall test up to each episode's fall (the diagonal of a confusion matrix of predictions), for "
+            "comparison. The diagonal runs start at frame 0 with mean actions, so they are the same on every "
+            "evaluation."
+        )
+        rule = "min coverage, then worst no-fall, then min diagonal." if a.rank == "fidelity" else "margin."
+    else:
+        measured = (
+            f"no-fall: {a.k} episodes of {a.seconds:g} s per skill. Target: no-fall >= {a.min_no_fall}. An AMP "
+            "(unconditional) run has no classifier: no Fig 6.8 diagonal, no argmax accuracy."
+        )
+        rule = "min coverage, then worst no-fall."
+    coverage = (
+        f" Coverage: `charctl eval RUN --fidelity -k {a.fidelity_k}` (share of the clip's frames the policy "
+        'matches within 0.15 m at every body, docs/cgail.md "Fidelity"); min coverage: the lowest over the '
+        "skills."
+    )
+    title = f"# Kept checkpoints of {run_dir.name}"
+    return [title, "", measured + (coverage if fid else ""), "Selection: the largest " + rule, ""]
 
 
 def _report_table(rows: list[dict], skills: list[str], a, fid: bool) -> str:
     """checkpoints.md's table: one row per checkpoint, one column per skill (min coverage with `fid`)."""
-    header = ["samples", "worst no-fall", "min diagonal", "min argmax acc.", *(["min coverage"] if fid else [])]
-    header += ["meets both", *skills]
-    align = "rrrr" + ("r" if fid else "") + "-" * (1 + len(skills))
+    cond = bool(a.conditional)
+    header = ["samples", "worst no-fall", *(["min diagonal", "min argmax acc."] if cond else [])]
+    header += [*(["min coverage"] if fid else []), *(["meets both"] if cond else []), *skills]
+    align = "r" * (2 + 2 * cond + fid) + "-" * (cond + len(skills))
     return markdown_grid(header, [_report_row(r, skills, a, fid) for r in rows], align=align)
 
 
 def _report_row(r: dict, skills: list[str], a, fid: bool) -> list[str]:
-    """One checkpoint's table cells: its summary numbers, whether it meets both targets, per-skill cells."""
+    """One checkpoint's table cells: its summary numbers, whether it meets both targets (a cGAIL run),
+    per-skill cells."""
+    cond = bool(a.conditional)
     cells = [
-        f"{r['no_fall'][s]:.2f} / {r['diagonal'][s]:.2f}" + (f" / {r['fidelity']['coverage'][s]:.2f}" if fid else "")
+        " / ".join(
+            [
+                f"{r['no_fall'][s]:.2f}",
+                *([f"{r['diagonal'][s]:.2f}"] if cond else []),
+                *([f"{r['fidelity']['coverage'][s]:.2f}"] if fid else []),
+            ]
+        )
         for s in skills
     ]
-    ok = r["worst_no_fall"] >= a.min_no_fall and r["min_diagonal"] >= a.min_diagonal
-    summary = [
-        f"{r['samples']:,}",
-        f"{r['worst_no_fall']:.3f}",
-        f"{r['min_diagonal']:.3f}",
-        f"{r['min_class_acc']:.3f}",
-    ]
-    return [*summary, *([f"{r['min_coverage']:.3f}"] if fid else []), "yes" if ok else "no", *cells]
+    summary = [f"{r['samples']:,}", f"{r['worst_no_fall']:.3f}"]
+    if cond:
+        summary += [f"{r['min_diagonal']:.3f}", f"{r['min_class_acc']:.3f}"]
+    summary += [f"{r['min_coverage']:.3f}"] if fid else []
+    if cond:
+        ok = r["worst_no_fall"] >= a.min_no_fall and r["min_diagonal"] >= a.min_diagonal
+        summary.append("yes" if ok else "no")
+    return [*summary, *cells]
 
 
 def _chosen_lines(chosen: dict, confirm: dict, fid: bool) -> list[str]:
     """The chosen checkpoint and its numbers on the confirming fresh starts."""
+    numbers = [f"worst no-fall {confirm['worst_no_fall']:.3f}"]
+    if confirm.get("min_diagonal") is not None:
+        numbers.append(f"min diagonal {confirm['min_diagonal']:.3f}")
+    if fid and "min_coverage" in confirm:
+        numbers.append(f"min coverage {confirm['min_coverage']:.3f}")
     return [
         "",
         f"Chosen: {chosen['checkpoint']} ({chosen['samples']:,} samples). "
-        f"On fresh starts (seed {confirm['seed']}): worst no-fall {confirm['worst_no_fall']:.3f}, "
-        f"min diagonal {confirm['min_diagonal']:.3f}"
-        + (f", min coverage {confirm['min_coverage']:.3f}." if fid and "min_coverage" in confirm else "."),
+        f"On fresh starts (seed {confirm['seed']}): " + ", ".join(numbers) + ".",
     ]
 
 
 def _plot_checkpoints(run_dir: Path, rows: list[dict], a, fid: bool, path: Path) -> None:
-    """checkpoints.png: the worst no-fall share, lowest diagonal (and lowest coverage) against samples
-    (millions), with the targets dotted."""
+    """checkpoints.png: the worst no-fall share, lowest diagonal (a cGAIL run) and lowest coverage (with
+    fidelity) against samples (millions), with the targets dotted."""
     from charctl.viz.plots import new_figure, save_figure
 
     fig, ax = new_figure(1, 1, figsize=(7, 3.5))
     x = [r["samples"] / 1e6 for r in rows]
     ax.plot(x, [r["worst_no_fall"] for r in rows], "o-", label="worst skill's no-fall share")
-    ax.plot(x, [r["min_diagonal"] for r in rows], "s-", label="lowest Fig 6.8 diagonal")
+    if a.conditional:
+        ax.plot(x, [r["min_diagonal"] for r in rows], "s-", label="lowest Fig 6.8 diagonal")
     if fid:
         ax.plot(x, [r["min_coverage"] for r in rows], "^-", label="lowest pose coverage (fidelity)")
     ax.axhline(a.min_no_fall, color="C0", ls=":", lw=1)
-    ax.axhline(a.min_diagonal, color="C1", ls=":", lw=1)
+    if a.conditional:
+        ax.axhline(a.min_diagonal, color="C1", ls=":", lw=1)
     ax.set_xlabel("samples (millions)")
     ax.set_ylim(0, 1.02)
     ax.legend(loc="lower right")
@@ -262,6 +297,14 @@ class CgailCheckpoints:
     rank: str
     seed: int
     confirm_seed: int
+    conditional: bool = True  # False: an AMP run (no classifier, no diagonal)
+    samples_key: str = "samples"  # the sample count in a checkpoint's state
+
+    def check(self, name: str) -> None:
+        """Load checkpoint `name` as `evaluate` does (its policy and discriminator, on the CPU)."""
+        from charctl.experiments.cgail.policy import load_trained_run
+
+        load_trained_run(self.run_dir, name)
 
     def evaluate(self, name: str, samples: int, out: Path, seed: int, confirm: bool = False) -> dict:
         row = evaluate_checkpoint(
@@ -277,42 +320,35 @@ class CgailCheckpoints:
             filmstrips=confirm,
             device=self.device,
         )
-        if not confirm:
+        if not confirm and row["min_diagonal"] is not None:  # an AMP run has no margin (--rank fidelity only)
             row["margin"] = margin(row["worst_no_fall"], row["min_diagonal"], self.min_no_fall, self.min_diagonal)
         return row
 
     def rank_key(self, row: dict) -> tuple:
         return rank_key(row, self.rank)
 
-    def write_report(self, rows: list[dict], chosen: dict, confirm: dict) -> str:
+    def write_report(self, rows: list[dict], chosen: dict, confirm: dict | None) -> str:
         return write_report(self.run_dir, rows, chosen, confirm, self)
 
 
 def checkpoints(targets: list[str], options: dict, overrides: list[str]) -> CgailCheckpoints:
-    """The `checkpoints` entry point: the settings of `--checkpoints`, every argument checked (one run, a
-    conditional one, no other mode but --survival / --fidelity, a known --rank, a machine that can draw the
-    confirmation's filmstrips when fidelity is measured) before anything is written."""
+    """The `checkpoints` entry point: the settings of `--checkpoints`, every argument checked (one cgail run,
+    no other mode but --survival / --fidelity, a known --rank, no classifier option for an AMP run, a
+    machine that can draw the confirmation's filmstrips when fidelity is measured) before anything is written."""
+    from charctl.eval.checkpoints import refuse_other_modes, single_run
     from charctl.experiments.cgail.policy import resolve_run_dirs
     from charctl.experiments.cgail.rollouts import split_eval_overrides
-    from charctl.runs import read_run_config, run_experiment
+    from charctl.runs import read_run_config
 
     device, overrides = split_eval_overrides(overrides)
-    run_dirs = resolve_run_dirs(targets, overrides, "eval")
-    if len(run_dirs) != 1:
-        raise CharctlError(f"--checkpoints evaluates the kept checkpoints of one run, got {len(run_dirs)}")
-    (run_dir,) = run_dirs
-    if run_experiment(run_dir) != "cgail":
-        raise CharctlError(f"{run_dir} is a {run_experiment(run_dir)!r} run, not a cgail run")
-    other = [m for m in OTHER_MODES if options.get(m)]
-    if other:
-        raise CharctlError(
-            f"--checkpoints measures no-fall (--survival SECONDS), the Fig 6.8 diagonal and fidelity (--fidelity) "
-            f"per checkpoint; it does not combine with --{other[0]}"
-        )
+    run_dir = single_run(resolve_run_dirs(targets, overrides, "eval"), "cgail")
+    measured = "no-fall (--survival SECONDS), the Fig 6.8 diagonal and fidelity (--fidelity)"
+    refuse_other_modes(options, OTHER_MODES, measured)
     if options.get("checkpoint"):
         raise CharctlError("--checkpoints evaluates every kept checkpoint; --checkpoint names one (give either)")
-    if not bool((read_run_config(run_dir).get("cgail") or {}).get("conditional", True)):
-        raise CharctlError(f"{run_dir} is an AMP (unconditional) run: it has no classifier for the Fig 6.8 diagonal")
+    conditional = bool((read_run_config(run_dir).get("cgail") or {}).get("conditional", True))
+    if not conditional:
+        refuse_classifier_options(run_dir, options)
     rank = options.get("rank") or RANKS[0]
     if rank not in RANKS:
         raise CharctlError(f"--rank takes {' or '.join(RANKS)}, got {rank!r}")
@@ -339,4 +375,17 @@ def checkpoints(targets: list[str], options: dict, overrides: list[str]) -> Cgai
         rank=rank,
         seed=int(pick("seed", SEED)),
         confirm_seed=int(pick("confirm_seed", CONFIRM_SEED)),
+        conditional=conditional,
     )
+
+
+def refuse_classifier_options(run_dir: Path, options: dict) -> None:
+    """A one-line error for an option of the Fig 6.8 diagonal (--rank margin, --confusion-k, --min-diagonal)
+    given for an AMP (unconditional) run, which has no classifier; it is ranked by fidelity."""
+    asked = ["--rank margin"] if options.get("rank") == "margin" else []
+    asked += ["--" + o.replace("_", "-") for o in CLASSIFIER_OPTIONS if options.get(o) is not None]
+    if asked:
+        raise CharctlError(
+            f"{run_dir} is an AMP (unconditional) run: it has no classifier for the Fig 6.8 diagonal that "
+            f"{asked[0]} needs; its checkpoints are ranked by fidelity (--rank fidelity)"
+        )

@@ -3,12 +3,13 @@
 Declaration only (no torch import); the work happens in the submodules, loaded on use.
     charctl train com-cnn [overrides]                 train (paper §3.4)
     charctl eval RUN... --pose-error [--dtw]          Table 5 style errors, autoregressive curve, baselines
+    charctl eval RUN --checkpoints [--after N]        every kept checkpoint ranked by its held-out pose error
     charctl export RUN --com-path FILE|circle:... --bvh OUT.bvh --video OUT.mp4
 """
 
 from __future__ import annotations
 
-from charctl.experiments import BVH, OUT, SECONDS, VIDEO, Experiment, Option
+from charctl.experiments import AFTER, BVH, CHECKPOINTS, OUT, SECONDS, VIDEO, Experiment, Option
 
 _PKG = "charctl.experiments.com_cnn"
 
@@ -19,10 +20,17 @@ EXPERIMENT = Experiment(
     train=f"{_PKG}.train:train",
     evaluate=f"{_PKG}.evaluate:evaluate",
     export=f"{_PKG}.export:export",
+    checkpoints=f"{_PKG}.eval_checkpoints:checkpoints",
     eval_options=(
         Option("pose_error", "teacher-forced and autoregressive joint-angle error (Table 5)", mode=True),
         Option("dtw", "DTW-aligned pose error on the held-out clips", mode=True),
         OUT,
+        Option(
+            CHECKPOINTS.name,
+            CHECKPOINTS.help + "; per checkpoint: --pose-error's teacher-forced held-out error (deg), the lowest wins",
+            mode=True,
+        ),
+        AFTER,
     ),
     export_options=(
         Option("com_path", "CSV file or circle:r=2,speed=1.2", str),

@@ -44,26 +44,41 @@ class LoadedRun:
 
 def load_run(run_dir: str | Path, overrides: list[str] | None = None, device: str = "cpu") -> LoadedRun:
     """Config, data and trained network of a com-cnn run directory."""
+    from charctl.experiments.com_cnn.model import model_signature
+
+    run = open_com_cnn_run(run_dir, overrides)
+    if not run.has_checkpoint():
+        raise CharctlError(f"{run_dir} has no checkpoint (checkpoints/last.pt): train it first")
+    seqs, body = load_sequences(run.cfg)
+    state = run.load_checkpoint(model_signature(run.cfg, body.pose_dim))
+    model = model_from_state(run.cfg, body.pose_dim, state, device)
+    metrics_path = Path(run_dir) / "metrics.json"
+    metrics = json.loads(metrics_path.read_text()) if metrics_path.is_file() else {}
+    return LoadedRun(Path(run_dir), run.cfg, model, body, seqs, metrics)
+
+
+def open_com_cnn_run(run_dir: str | Path, overrides: list[str] | None = None):
+    """The re-opened run (charctl.runs.Run, config validated, `overrides` applied), torch's threads set
+    from its train.torch_threads; a one-line error for a run of another experiment."""
     import torch
 
     from charctl.experiments.com_cnn.config import Config
-    from charctl.experiments.com_cnn.model import build_model, model_signature
     from charctl.runs import open_run
 
     run = open_run(run_dir, Config, overrides)
     if run.experiment != "com-cnn":
         raise CharctlError(f"{run_dir} is a {run.experiment!r} run, not com-cnn")
-    if not run.has_checkpoint():
-        raise CharctlError(f"{run_dir} has no checkpoint (checkpoints/last.pt): train it first")
     torch.set_num_threads(int(run.cfg.train.torch_threads))
-    seqs, body = load_sequences(run.cfg)
-    state = run.load_checkpoint(model_signature(run.cfg, body.pose_dim))
-    model = build_model(run.cfg, body.pose_dim)
+    return run
+
+
+def model_from_state(cfg, pose_dim: int, state: dict, device: str = "cpu"):
+    """The network of a checkpoint's `state` (its "model"), built for `cfg`, in eval mode on `device`."""
+    from charctl.experiments.com_cnn.model import build_model
+
+    model = build_model(cfg, pose_dim)
     model.load_state_dict(state["model"])
-    model.eval().to(device)
-    metrics_path = Path(run_dir) / "metrics.json"
-    metrics = json.loads(metrics_path.read_text()) if metrics_path.is_file() else {}
-    return LoadedRun(Path(run_dir), run.cfg, model, body, seqs, metrics)
+    return model.eval().to(device)
 
 
 def resolve_targets(targets: list[str], overrides: list[str] | tuple[str, ...] = ()) -> list[Path]:

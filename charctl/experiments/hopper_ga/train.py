@@ -11,6 +11,11 @@ from charctl.experiments.hopper_ga.runtime import make_evaluator
 from charctl.experiments.hopper_ga.settings import settings_from_config
 
 
+def ga_signature(cfg, settings) -> dict:
+    """What a checkpoint must match to load into this config's GA: the genome length and the population size."""
+    return {"genes": len(settings.low), "population": int(cfg.ga.population)}
+
+
 class GaLearner:
     """One generation of the GA for the shared runner. Generation 0 (the random initial population) is
     evaluated in the first iteration, before generation 1, so `iteration` counts generations
@@ -29,7 +34,7 @@ class GaLearner:
         return self.ga.state
 
     def signature(self) -> dict:
-        return {"genes": len(self.s.low), "population": int(self.cfg.ga.population)}
+        return ga_signature(self.cfg, self.s)
 
     def modules(self) -> list:
         return []
