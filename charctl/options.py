@@ -10,6 +10,7 @@ Declared once here for every experiment; an option that is None / False (not giv
 from __future__ import annotations
 
 import math
+import operator
 from pathlib import Path
 from typing import Any
 
@@ -30,6 +31,12 @@ NUMBER_RULES: dict[str, tuple[str, float]] = {
     "seed": (">=", 0),
     "confirm_seed": (">=", 0),
 }
+# option name -> (bound, limit): the value must also be < / <= the limit
+UPPER_RULES: dict[str, tuple[str, float]] = {
+    "min_no_fall": ("<=", 1.0),  # shares in [0, 1]
+    "min_diagonal": ("<=", 1.0),
+}
+_COMPARE = {">": operator.gt, ">=": operator.ge, "<": operator.lt, "<=": operator.le}
 # options that name a file charctl writes
 OUTPUT_FILES = ("output", "bvh", "video", "onnx", "torchscript")
 
@@ -40,14 +47,14 @@ def flag(name: str) -> str:
 
 
 def check_numbers(options: dict[str, Any]) -> None:
-    for name, (bound, limit) in NUMBER_RULES.items():
+    """Every option of NUMBER_RULES / UPPER_RULES that is given: a finite number within its bounds."""
+    for name, (bound, limit) in [*NUMBER_RULES.items(), *UPPER_RULES.items()]:
         value = options.get(name)
         if value is None or isinstance(value, bool):
             continue
         if not isinstance(value, (int, float)) or not math.isfinite(value):
             raise CharctlError(f"{flag(name)} must be a finite number, got {value}")
-        ok = value > limit if bound == ">" else value >= limit
-        if not ok:
+        if not _COMPARE[bound](value, limit):
             raise CharctlError(f"{flag(name)} must be {bound} {limit:g}, got {value:g}")
 
 

@@ -6,7 +6,12 @@ disk: the output folder the command was pointed at stays absent, and nothing app
 (output_root, a new run directory) or in the run directories it read. Several cases are the ones that
 used to fail only after a first file was written: an unknown sweep case (config.yaml in -o), a second
 hopper-ga run without a checkpoint (the first run's figures), the web demo of a tracking run (the ONNX
-file), --fps on a BVH-folder skeleton (a new run directory), a missing --checkpoint with --curves.
+file), --fps on a BVH-folder skeleton (a new run directory), a missing --checkpoint with --curves, a sweep's
+missing data.bvh_dir, unknown clip or too low data.fps (config.yaml in -o, or a new run directory).
+
+On a machine that cannot render, the modes that render (`NO_RENDER`) give their one-line error before
+anything is written: it used to come after com-cnn's CSV, plot and BVH, hopper-ga's BVH and
+motion-matching's run directory and BVH.
 
 The commands run in this process (`charctl_main`: the console script's error handling without an
 interpreter start per case); shipped policies from pretrained/ are read, never written.
@@ -36,6 +41,8 @@ MODES = [
     ("eval-cgail-survival", "eval {cgail} --survival 1 --switch walk nosuch -k 1 -o {out}", ["nosuch"]),
     ("eval-cgail-fidelity", "eval {cgail} --fidelity -k 1 -o {out} device=tpu", ["tpu"]),
     ("eval-cgail-checkpoints", "eval {cgail} --checkpoints --rank nosuch -o {out}", ["--rank", "nosuch"]),
+    ("eval-cgail-min-no-fall", "eval {cgail} --checkpoints --min-no-fall 1.5 -o {out}", ["--min-no-fall", "<= 1"]),
+    ("eval-cgail-min-diagonal", "eval {cgail} --checkpoints --min-diagonal 2 -o {out}", ["--min-diagonal", "<= 1"]),
     # eval: the other experiments
     ("eval-srb-push", "eval {srb} --push -k 1 -o {out} push.baseline_run={tmp}/nosuch", ["nosuch"]),
     ("eval-com-cnn-pose-error", "eval {com} --pose-error -o {out} data.test_clips=[]", ["held-out"]),
@@ -45,6 +52,21 @@ MODES = [
         "eval-mm-sweep",
         "eval motion-matching --sweep scale=smoke sweep.cases=[99] output_root={tmp}/runs -o {out}",
         ["sweep.cases", "99"],
+    ),
+    (
+        "eval-mm-sweep-bvh-dir",
+        "eval motion-matching --sweep scale=smoke output_root={tmp}/runs data.bvh_dir={tmp}/nosuch -o {out}",
+        ["data.bvh_dir", "nosuch"],
+    ),
+    (  # no -o: the sweep's new run directory under output_root must not be made either
+        "eval-mm-sweep-clips",
+        "eval motion-matching --sweep scale=smoke output_root={tmp}/runs data.clips=[nosuch_clip]",
+        ["nosuch_clip"],
+    ),
+    (
+        "eval-mm-sweep-fps",
+        "eval motion-matching --sweep scale=smoke output_root={tmp}/runs data.fps=1 -o {out}",
+        ["data.fps"],
     ),
     ("eval-hopper-curves", "eval {hopper} {hopper_bare} --curves -o {out}", ["no checkpoint"]),
     ("eval-hopper-checkpoints", "eval {hopper_bare} --checkpoints -o {out}", ["no checkpoint to evaluate"]),
@@ -73,6 +95,20 @@ MODES = [
     ),
     ("export-hopper-bvh", "export {hopper} --bvh {out}/h.bvh --seconds 0", ["--seconds"]),
     ("export-hopper-video", "export {hopper} --video {out}/h.mp4 --fps -5", ["--fps"]),
+]
+
+# (id, arguments) of the modes that render, run on a machine that cannot: the one-line error before any file
+NO_RENDER = [
+    ("eval-cgail-fidelity", "eval {cgail} --fidelity -k 1 -o {out}"),
+    ("export-clip-video", "export video walk -o {out}/w.mp4"),
+    ("export-cgail-video", "export {cgail} --onnx {out}/p.onnx --bvh {out}/r.bvh --video {out}/r.mp4"),
+    ("export-srb-video", "export {srb} --video {out}/v.mp4 --seconds 1"),
+    ("export-com-cnn-video", "export {com} --bvh {out}/g.bvh --video {out}/g.mp4"),
+    (
+        "export-mm-video",
+        "export motion-matching scale=smoke output_root={tmp}/runs --bvh {out}/x.bvh --video {out}/x.mp4",
+    ),
+    ("export-hopper-video", "export {hopper} --bvh {out}/h.bvh --video {out}/h.mp4"),
 ]
 
 
@@ -125,6 +161,37 @@ def test_a_bad_argument_writes_nothing(case, runs, tmp_path, charctl_main, monke
         import charctl.experiments.cgail.web_site as web_site
 
         monkeypatch.setattr(web_site, "check_web_sources", lambda *a, **k: None)
+    assert_writes_nothing(charctl_main, template, words, runs, tmp_path)
+
+
+@pytest.mark.parametrize("case", NO_RENDER, ids=[c[0] for c in NO_RENDER])
+def test_a_machine_that_cannot_render_writes_nothing(case, runs, tmp_path, charctl_main, monkeypatch):
+    """No OpenGL (charctl.viz.video.make_renderer fails): the error comes before any other output is written."""
+    import charctl.viz.video as video
+    from charctl.errors import CharctlError
+
+    def no_gl(*args, **kwargs):
+        raise CharctlError("cannot render with MUJOCO_GL=osmesa (no libOSMesa); install Debian's libosmesa6")
+
+    monkeypatch.setattr(video, "make_renderer", no_gl)
+    assert_writes_nothing(charctl_main, case[1], ["cannot render"], runs, tmp_path)
+
+
+def test_share_options_are_bounded_by_one():
+    """--min-no-fall and --min-diagonal are shares: 0 and 1 pass, above 1 is a one-line error naming the flag."""
+    from charctl.errors import CharctlError
+    from charctl.options import check_options
+
+    for name in ("min_no_fall", "min_diagonal"):
+        check_options({name: 0.0})
+        check_options({name: 1.0})
+        with pytest.raises(CharctlError, match=f"--{name.replace('_', '-')} must be <= 1, got 1.01"):
+            check_options({name: 1.01})
+
+
+def assert_writes_nothing(charctl_main, template: str, words: list[str], runs: dict[str, Path], tmp_path: Path) -> None:
+    """The command `template` exits 2 with one `error:` line containing `words`; {out} stays absent and
+    nothing appears in the sandbox or in the run directories the command names."""
     out = tmp_path / "out"
     values = {"out": out, "tmp": tmp_path, **runs}
     watched = [tmp_path] + [p for key, p in runs.items() if "{" + key + "}" in template]

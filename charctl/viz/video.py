@@ -52,6 +52,14 @@ def make_renderer(model, width: int = 640, height: int = 360):
         ) from None
 
 
+def check_can_render() -> None:
+    """A one-line CharctlError now if this machine cannot render (so a command that writes a video checks
+    this before any of its other files is written)."""
+    from charctl.sim.humanoid import load_model
+
+    make_renderer(load_model(), 32, 32).close()
+
+
 def write_video(frames: list[np.ndarray], path: str | Path, fps: float) -> Path:
     """Write HxWx3 uint8 frames as an H.264 mp4 (atomic: temp file then rename)."""
     import imageio.v2 as imageio

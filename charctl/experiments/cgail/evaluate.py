@@ -121,7 +121,7 @@ def evaluate(targets: list[str], options: dict, overrides: list[str]) -> None:
     device, overrides = split_eval_overrides(overrides)
     run_dirs = resolve_run_dirs(targets, overrides, "eval")
     if options.get("fidelity"):
-        from charctl.experiments.cgail.fidelity import check_can_render
+        from charctl.viz.video import check_can_render
 
         check_can_render()  # the filmstrips: a machine that cannot render says so before anything is written
     checkpoint = options.get("checkpoint")

@@ -150,7 +150,7 @@ def export(target: str, options: dict, overrides: list[str]) -> None:
             "does not play; export a cgail (adversarial) run"
         )
     if options.get("video"):
-        from charctl.experiments.cgail.fidelity import check_can_render
+        from charctl.viz.video import check_can_render
 
         check_can_render()  # a machine that cannot render says so before the other files are written
     if options.get("onnx"):

@@ -38,6 +38,7 @@ from charctl.eval.fidelity import (
     standing_sole_height,
 )
 from charctl.experiments.cgail.drive import policy_steps
+from charctl.viz.video import check_can_render  # noqa: F401  re-exported (eval_checkpoints.py)
 
 EPISODE_SECONDS = 5.0  # minimum episode length; longer clips get one clip length
 FILMSTRIP_FRAMES = 8
@@ -227,14 +228,6 @@ def write_skill_filmstrip(rec: Recording, ref: ClipReference, path: Path, title:
         ],
         title=title,
     )
-
-
-def check_can_render() -> None:
-    """A one-line CharctlError now if this machine cannot render the filmstrips (before any file is written)."""
-    from charctl.sim.humanoid import load_model
-    from charctl.viz.video import make_renderer
-
-    make_renderer(load_model(), 32, 32).close()
 
 
 # ---------------------------------------------------------------------------- eval mode

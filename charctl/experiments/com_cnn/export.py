@@ -24,8 +24,8 @@ def export(target: str, options: dict, overrides: list[str]) -> None:
     """Generate from `--com-path` (default generate.com_path) and write `--bvh` / `--video`, the clamped
     input COM as CSV and a plot next to it."""
     run = load_run(resolve_targets([target], overrides)[0], overrides)
-    if options.get("video") is not None and run.body.kind != "humanoid":
-        raise CharctlError(VIDEO_NEEDS_HUMANOID)  # before the CSV, plot and BVH beside it are written
+    if options.get("video") is not None:
+        _check_video(run)  # before the CSV, plot and BVH beside it are written
     g, fps = run.cfg.generate, float(run.cfg.data.fps)
     spec = options.get("com_path") or str(g.com_path)
     out = generate_motion(run, spec, float(options.get("seconds") or g.seconds), options.get("crouch_at"))
@@ -58,3 +58,12 @@ def export(target: str, options: dict, overrides: list[str]) -> None:
         )
         print(f"wrote {video} ({info['frames']} frames; purple ball = input COM, as in the paper's Fig. 1)")
     print(f"wrote {side}_com_path.csv (the clamped input COM) and {side}_plot.png")
+
+
+def _check_video(run) -> None:
+    """--video: a humanoid run (a data.bvh_dir skeleton is not rendered) on a machine that can render."""
+    from charctl.viz.video import check_can_render
+
+    if run.body.kind != "humanoid":
+        raise CharctlError(VIDEO_NEEDS_HUMANOID)
+    check_can_render()

@@ -28,6 +28,10 @@ def export_run(run_dir: Path, options: dict, overrides: list[str] | None = None)
     fps = options.get("fps")
     if fps is not None and fps <= 0:
         raise CharctlError(f"--fps must be positive, got {fps}")
+    if options.get("video"):
+        from charctl.viz.video import check_can_render
+
+        check_can_render()  # a machine that cannot render says so before the BVH is written
     motion = run_motion(genome, s, cycles_for(seconds, gait_summary(genome, s)["cycle_time_s"]))
     l = float(genome[0])
     if options.get("bvh"):

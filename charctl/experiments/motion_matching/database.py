@@ -116,15 +116,22 @@ def paper_frames(n: float, cfg) -> int:
     return int(round(n * cfg.data.fps / cfg.frame_unit_hz))
 
 
-def build_database(cfg, sources: list[SourceMotion] | None = None, info: SkeletonInfo | None = None) -> Database:
-    """Build the database for `cfg` (sources are loaded unless given, to share them across a sweep)."""
-    if sources is None or info is None:
-        sources, info = load_sources(cfg)
+def feature_offsets(cfg) -> tuple[np.ndarray, np.ndarray]:
+    """(future, past) trajectory sample offsets in database frames; one that rounds to 0 frames at
+    data.fps is a one-line error."""
     f = cfg.features
     fut = np.array([paper_frames(i * f.future_spacing, cfg) for i in range(1, f.future_samples + 1)])
     past = np.array([paper_frames(j * f.past_spacing, cfg) for j in range(1, f.past_samples + 1)], dtype=int)
     if np.any(fut < 1) or np.any(past < 1):
         raise CharctlError("a feature sample offset rounds to 0 frames at data.fps; raise data.fps or the spacing")
+    return fut, past
+
+
+def build_database(cfg, sources: list[SourceMotion] | None = None, info: SkeletonInfo | None = None) -> Database:
+    """Build the database for `cfg` (sources are loaded unless given, to share them across a sweep)."""
+    if sources is None or info is None:
+        sources, info = load_sources(cfg)
+    fut, past = feature_offsets(cfg)
     per_clip = [_clip_arrays(s, info, cfg, fut, past) for s in sources]
     cat = {k: np.concatenate([p[k] for p in per_clip]) for k in per_clip[0] if k not in ("blocks",)}
     lengths = np.array([s.root_pos.shape[0] for s in sources])

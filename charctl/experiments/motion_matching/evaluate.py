@@ -7,6 +7,7 @@ from __future__ import annotations
 import json
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -15,19 +16,27 @@ from charctl.eval.report import markdown_grid, write_json
 from charctl.experiments.motion_matching.cases import TABLE1, describe, with_case
 from charctl.experiments.motion_matching.config import NAME, load_config
 
+if TYPE_CHECKING:
+    from charctl.experiments.motion_matching.sources import SkeletonInfo, SourceMotion
+
 
 # ---------------------------------------------------------------------------- eval --sweep
 def evaluate(targets: list[str], options: dict, overrides: list[str]) -> None:
     """`--sweep [-o DIR]`: the Table 1 feature study -> sweep.json, sweep.md, plots, metrics.json."""
+    from charctl.experiments.motion_matching.sources import load_sources
     from charctl.progress import TrainingProgress
 
     if not options.get("sweep"):
         raise CharctlError("motion-matching evaluates with --sweep (the Table 1 feature study)")
     cfg = load_config(targets, overrides)
-    cases, paths = sweep_plan(cfg)  # every case and path checked before the output folder is made
+    # every case, path and source (data.bvh_dir or data.clips) checked before the output folder is made
+    cases, paths = sweep_plan(cfg)
+    sources = load_sources(cfg)
     out = output_dir(cfg, options.get("out"))
     with TrainingProgress(len(cases), "Table 1 sweep", unit="cases") as bar:
-        payload = run_sweep(cfg, out, progress=lambda case: bar.update(1, case=case), plan=(cases, paths))
+        payload = run_sweep(
+            cfg, out, progress=lambda case: bar.update(1, case=case), plan=(cases, paths), sources=sources
+        )
     write_json(out / "metrics.json", {k: v for k, v in payload.items() if k != "cases"})
     print((out / "sweep.md").read_text())
     print(
@@ -52,19 +61,29 @@ def output_dir(cfg, out: str | Path | None) -> Path:
 
 # ---------------------------------------------------------------------------- running the sweep
 def sweep_plan(cfg) -> tuple[list[int], dict]:
-    """(the Table 1 cases of cfg.sweep, its target paths by name); an unknown case or path is a one-line error."""
+    """(the Table 1 cases of cfg.sweep, its target paths by name); an unknown case or path, or a case whose
+    feature offsets round to 0 frames at data.fps, is a one-line error."""
+    from charctl.experiments.motion_matching.database import feature_offsets
     from charctl.experiments.motion_matching.paths import make_path
 
     cases = list(cfg.sweep.cases) or sorted(TABLE1)
     bad = [c for c in cases if c not in TABLE1]
     if bad:
         raise CharctlError(f"sweep.cases: {bad[0]} is not a Table 1 case (1..19)")
+    for case in cases:
+        feature_offsets(with_case(cfg, case))
     return cases, {p: make_path(p, cfg.paths) for p in cfg.sweep.paths}
 
 
-def run_sweep(cfg, out_dir: Path, progress=None, plan: tuple[list[int], dict] | None = None) -> dict:
-    """Run the cases of cfg.sweep on its paths (`plan`: `sweep_plan(cfg)` when already made); write
-    sweep.json, sweep.md and PNG plots to out_dir."""
+def run_sweep(
+    cfg,
+    out_dir: Path,
+    progress=None,
+    plan: tuple[list[int], dict] | None = None,
+    sources: tuple[list[SourceMotion], SkeletonInfo] | None = None,
+) -> dict:
+    """Run the cases of cfg.sweep on its paths (`plan`: `sweep_plan(cfg)`, `sources`: `load_sources(cfg)`
+    when already made); write sweep.json, sweep.md and PNG plots to out_dir."""
     from charctl.experiments.motion_matching.database import build_database
     from charctl.experiments.motion_matching.runtime import run_path
     from charctl.experiments.motion_matching.search import make_index
@@ -73,7 +92,7 @@ def run_sweep(cfg, out_dir: Path, progress=None, plan: tuple[list[int], dict] | 
     cases, paths = plan or sweep_plan(cfg)
     starts = int(cfg.sweep.starts)
     tic = time.perf_counter()
-    sources, info = load_sources(cfg)
+    sources, info = sources or load_sources(cfg)
     results: dict[int, dict] = {}
     rollouts: dict[int, dict] = {}
     for case in cases:

@@ -61,13 +61,18 @@ def export(target: str, options: dict, overrides: list[str]) -> None:
 
 
 def _check_options(cfg, options: dict, seconds: float | None) -> None:
-    """Reject `--seconds` <= 0, `--video` with a user skeleton (data.bvh_dir) and `--fps` for its BVH."""
+    """Reject `--seconds` <= 0, `--video` with a user skeleton (data.bvh_dir) or on a machine that cannot
+    render, and `--fps` for a user skeleton's BVH."""
     if seconds is not None and seconds <= 0:
         raise CharctlError(f"--seconds must be positive, got {seconds}")
     if options.get("video") and cfg.data.bvh_dir:
         raise CharctlError("--video needs the humanoid database; with data.bvh_dir export --bvh only")
     if options.get("bvh") and options.get("fps") is not None and cfg.data.bvh_dir:
         raise CharctlError(FPS_USER_SKELETON)
+    if options.get("video"):
+        from charctl.viz.video import check_can_render
+
+        check_can_render()  # before the run directory and the BVH are written
 
 
 def _write_root_path(file: Path, rollout, fps: float) -> None:
