@@ -21,7 +21,7 @@ import os
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Annotated, Any, Literal
 
 from charctl.config_fields import check_fields, field_type, ranged
 from charctl.errors import CharctlError
@@ -32,7 +32,8 @@ class BaseConfig:
     """Keys every experiment has."""
 
     experiment: str = "???"  # the experiment this config belongs to (the positional argument sets it)
-    scale: str = "small"  # smoke | small | paper
+    # smoke | small | paper: the presets of conf/scale/ (the command line picks one with scale=NAME)
+    scale: Annotated[str, Literal["smoke", "small", "paper"]] = "small"
     seed: int = ranged(0, ge=0)  # every RNG (numpy, torch, env resets) derives from this
     output_root: str = "outputs"  # run directories go to <output_root>/<experiment>/<timestamp>/
     device: str = "auto"  # auto | cpu | cuda (auto: cuda when available)

@@ -69,7 +69,8 @@ class EnvConfig:
     # (episodes ended by a fall or, with reward.pose_error_threshold, by a large pose error), the rest
     # uniformly. 0 = uniform (the paper). docs/cgail.md, "Ten skills".
     skill_fall_weight: float = 0.0
-    skill_fall_halflife: float = 200.0  # episodes of a skill after which its fall-rate estimate has half forgotten
+    # episodes of a skill after which its fall-rate estimate has half forgotten
+    skill_fall_halflife: float = ranged(200.0, gt=0)
     action_scale: float = ranged(1.0, gt=0)  # PD target (rad) = rest pose + action_scale * action
     fall_tolerance: float = ranged(0.005, ge=0)  # m: a non-foot body this close to the ground ends the episode (a fall)
     goal_max_angle_deg: float = 45.0  # new heading goals lie within +- this angle of the current heading
@@ -97,27 +98,28 @@ class RewardConfig:
     # Early termination on a low style reward (ProtoMotions AMP, against the stand-still optimum): an episode ends
     # when r_S of its pairs, scored for its command, stayed below this for low_style_steps control steps in a row.
     # 0 = off (the paper). charctl.experiments.cgail.termination; docs/cgail.md, "Fidelity recipe".
-    low_style_threshold: float = 0.0
-    low_style_steps: int = 10  # consecutive control steps below low_style_threshold that end an episode
+    low_style_threshold: float = ranged(0.0, ge=0, lt=1)
+    low_style_steps: int = ranged(10, ge=1)  # consecutive control steps below low_style_threshold that end an episode
     # Early termination on a large pose error against the commanded clip's timed reference (DeepMimic-style
     # tracking termination; the reward stays adversarial). From an RSI the reference runs on from the start frame
     # (a non-looping clip restarts at frame 0 when it ends); after a command switch it starts at frame 0 once the
     # ramp has finished. An episode ends (no bootstrap, not a fall) when a hand, a foot (relative to the root,
     # heading frame) or the root height is farther than this (m) from the reference, outside the grace steps
     # that follow each restart. 0 = off (the paper). docs/cgail.md, "Fidelity recipe".
-    pose_error_threshold: float = 0.0
-    pose_error_grace_steps: int = 10  # control steps after a reference restart with no check (time to reach frame 0)
+    pose_error_threshold: float = ranged(0.0, ge=0)
+    # control steps after a reference restart with no check (time to reach frame 0)
+    pose_error_grace_steps: int = ranged(10, ge=0)
     # Root-height radius (m) of the pose-error check: > 0 ends an episode also where the root height differs from the
     # reference's by more than this, so a jump done on the ground (its clip's root rises 0.29 m above the stance)
     # is ended at the clip's flight. 0 = the root height counts against pose_error_threshold like a hand or foot.
     # Needs pose_error_threshold > 0. docs/cgail.md, "Flight".
-    root_height_threshold: float = 0.0
+    root_height_threshold: float = ranged(0.0, ge=0)
     # Heading radius (rad) of the pose-error check: > 0 ends an episode also where the character's yaw has drifted
     # from its timed reference's by more than this, summed over the reference's checked steps (rules.add_yaw_error;
     # skills without a heading goal only). The pose check compares hands and feet in the heading frame, so a spin
     # done without turning passes it; the spins turn 2*pi per loop (4.7-5.7 rad/s), the kicks 2.1 rad.
     # 0 = off. Needs pose_error_threshold > 0. docs/cgail.md, "Flight".
-    yaw_error_threshold: float = 0.0
+    yaw_error_threshold: float = ranged(0.0, ge=0)
     # Weight w_T of a DeepMimic tracking reward (env.tracking_reward, in [0, 1]) against the pose-error check's
     # reference (the timed frame of a non-looping clip, the closest frame of a looping one), added to eq 4.1
     # where the reference is checked (0 during ramps and grace steps). Needs pose_error_threshold > 0.
@@ -162,7 +164,7 @@ class TrainConfig:
     checkpoint_every: int = ranged(10, ge=1)  # iterations between checkpoints
     # samples between checkpoints also kept as checkpoints/samples_<n>.pt beside last.pt, so any of them can
     # be evaluated later (charctl eval RUN --checkpoint samples_<n>.pt); 0 = only last.pt
-    keep_checkpoint_every: int = 0
+    keep_checkpoint_every: int = ranged(0, ge=0)
     log_every: int = ranged(1, ge=1)  # iterations between TensorBoard / progress updates
     # torch intra-op threads of the updates (the rollout's policy forward uses one)
     torch_threads: int = ranged(2, ge=1)
@@ -176,7 +178,7 @@ class TrainConfig:
     # samples between the cheap fidelity evaluation's scalars in TensorBoard (fidelity/<skill>/coverage, body_error,
     # foot_peak, airborne, yaw_rate, fidelity/min_coverage; charctl.experiments.cgail.fidelity.training_fidelity,
     # 2 episodes per skill, a few seconds each time; not in the paper: a diagnostic, on by default); 0 = off
-    fidelity_every: int = 2_000_000
+    fidelity_every: int = ranged(2_000_000, ge=0)
 
 
 # The knobs whose ablations lost, removed on 2026-12-03 with their code (docs/cgail.md keeps their rows and
@@ -232,9 +234,9 @@ class Config(BaseConfig):
     @staticmethod
     def check(cfg) -> str | None:
         """Cross-field checks; returns a message or None. validate has checked each field's declared
-        choices and range (charctl.config_fields.check_fields) before; the choices are checked here again for
+        choices and range (charctl.config_fields.check_fields) before; they are checked here again for
         callers of check alone. The groups run in order and the first problem found is reported."""
-        if (msg := check_fields(cfg, Config, ranges=False)) is not None:  # declared choices (direct callers too)
+        if (msg := check_fields(cfg, Config)) is not None:  # declared choices and ranges (direct callers too)
             return msg
         for group in (_check_skills, _check_rewards, _check_disc, _check_env, _check_train):
             if (msg := group(cfg)) is not None:
@@ -256,20 +258,19 @@ def _check_skills(cfg) -> str | None:
 
 
 def _check_rewards(cfg) -> str | None:
-    """The early terminations, the tracking reward and the multi-skill tracking baseline."""
+    """The early terminations, the tracking reward and the multi-skill tracking baseline. The ranges of
+    low_style_threshold, low_style_steps, pose_error_threshold, pose_error_grace_steps, root_height_threshold
+    and yaw_error_threshold are declared on the fields."""
     r = cfg.reward
-    if not 0.0 <= r.low_style_threshold < 1.0 or r.low_style_steps < 1:
-        return "reward.low_style_threshold must lie in [0, 1) and reward.low_style_steps be >= 1"
     if r.low_style_threshold > 0 and r.kind != "adversarial":
         return "reward.low_style_threshold > 0 needs reward.kind=adversarial"
-    if r.pose_error_threshold < 0 or r.pose_error_grace_steps < 0:
-        return "reward.pose_error_threshold and reward.pose_error_grace_steps must be >= 0"
     if r.pose_error_threshold > 0 and r.kind != "adversarial":
         return "reward.pose_error_threshold > 0 needs reward.kind=adversarial"
-    if r.root_height_threshold < 0 or (r.root_height_threshold > 0 and r.pose_error_threshold <= 0):
+    if r.root_height_threshold > 0 and r.pose_error_threshold <= 0:
         return "reward.root_height_threshold must be >= 0, and > 0 only with reward.pose_error_threshold > 0"
-    if r.yaw_error_threshold < 0 or (r.yaw_error_threshold > 0 and r.pose_error_threshold <= 0):
+    if r.yaw_error_threshold > 0 and r.pose_error_threshold <= 0:
         return "reward.yaw_error_threshold must be >= 0, and > 0 only with reward.pose_error_threshold > 0"
+    # w_track's >= 0 stays here, undeclared: tests/test_config_help.py pins w_track as a knob with no declared range
     if r.w_track < 0 or (r.w_track > 0 and r.pose_error_threshold <= 0):
         return "reward.w_track must be >= 0, and > 0 only with reward.pose_error_threshold > 0 (its reference)"
     n_skills = len(cfg.use_skills) if cfg.use_skills else len(cfg.skills)
@@ -285,6 +286,7 @@ def _check_disc(cfg) -> str | None:
     """The per-skill style head and its wrong-skill fakes."""
     if cfg.disc.style_head == "per_skill" and not cfg.cgail.conditional:
         return "disc.style_head=per_skill needs cgail.conditional=true (it scores pairs for their command)"
+    # kept as code, not ranged(): tests/test_cgail_style_head.py matches this "must lie in" wording
     if not 0.0 <= cfg.disc.wrong_skill_fakes < 1.0:
         return f"disc.wrong_skill_fakes must lie in [0, 1), got {cfg.disc.wrong_skill_fakes}"
     if cfg.disc.wrong_skill_fakes > 0 and cfg.disc.style_head != "per_skill":
@@ -293,26 +295,20 @@ def _check_disc(cfg) -> str | None:
 
 
 def _check_env(cfg) -> str | None:
-    """Physics and control rates and fall-weighted commands."""
+    """Physics and control rates and fall-weighted commands (skill_fall_halflife's range is declared on the field)."""
     env = cfg.env
     ratio = env.physics_hz / env.control_hz
     if abs(ratio - round(ratio)) > 1e-6:
         return f"env.physics_hz ({env.physics_hz}) must be a multiple of env.control_hz ({env.control_hz})"
+    # kept as code, not ranged(): tests/test_cgail.py matches this "must lie in" wording
     if not 0.0 <= env.skill_fall_weight <= 1.0:
         return f"env.skill_fall_weight must lie in [0, 1], got {env.skill_fall_weight}"
-    if env.skill_fall_halflife <= 0:
-        return f"env.skill_fall_halflife must be > 0 episodes, got {env.skill_fall_halflife}"
     return None
 
 
 def _check_train(cfg) -> str | None:
-    """Fidelity logging, kept checkpoints, the ramp and the Warp backend's availability."""
-    if cfg.train.fidelity_every < 0:
-        return "train.fidelity_every must be >= 0 samples (0 = off)"
-    if cfg.train.keep_checkpoint_every < 0:
-        return "train.keep_checkpoint_every must be >= 0 samples (0 = keep only last.pt)"
-    if cfg.env.ramp_frames < 0:
-        return "env.ramp_frames must be >= 0"
+    """The Warp backend's availability (the ranges of train.fidelity_every, train.keep_checkpoint_every and
+    env.ramp_frames are declared on the fields)."""
     if cfg.env.backend == "warp":
         import importlib.util
 

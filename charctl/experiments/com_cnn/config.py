@@ -189,20 +189,18 @@ class Config(BaseConfig):
 
     @staticmethod
     def check(cfg) -> str | None:
-        """Cross-key checks; a string describes the first problem."""
-        if (msg := check_fields(cfg, Config, ranges=False)) is not None:  # declared choices (direct callers too)
+        """Cross-key checks; a string describes the first problem. validate has checked each field's declared
+        choices and range (charctl.config_fields.check_fields) before; they are checked here again for callers
+        of check alone."""
+        if (msg := check_fields(cfg, Config)) is not None:  # declared choices and ranges (direct callers too)
             return msg
-        if cfg.data.history < 1 or not cfg.model.channels or cfg.model.kernel < 1 or cfg.model.pool < 1:
-            return "data.history, model.kernel, model.pool must be >= 1 and model.channels non-empty"
+        if not cfg.model.channels:
+            return "model.channels must be non-empty (one entry per conv layer)"
         if conv_output_length(cfg.data.history, cfg.model.kernel, cfg.model.pool, len(cfg.model.channels)) < 1:
             return (
                 f"history {cfg.data.history} is too short for {len(cfg.model.channels)} conv layers of kernel "
                 f"{cfg.model.kernel} with pooling {cfg.model.pool}"
             )
-        if cfg.data.fps <= 0 or cfg.train.steps < 1 or cfg.train.batch_size < 1:
-            return "data.fps, train.steps and train.batch_size must be positive"
-        if cfg.generate.max_com_step <= 0:
-            return "generate.max_com_step must be positive"
         if not cfg.data.bvh_dir:
             missing = [c for c in cfg.data.test_clips if c not in cfg.data.clips]
             if missing:

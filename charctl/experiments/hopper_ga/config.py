@@ -17,7 +17,7 @@ class HopperConfig:
     """The planar spring hopper (eq 1-6)."""
 
     h: float = ranged(0.01, gt=0)  # s, frame step h of eq 2 and eq 10 (paper Fig 3.5/3.7: 0.01)
-    g: float = -9.81  # m/s^2, gravity (negative, as in eq 2 and eq 4)
+    g: float = ranged(-9.81, lt=0)  # m/s^2, gravity (negative, as in eq 2 and eq 4)
     touchdown_vy: float = 0.0  # m/s, HIP vertical speed at the first touchdown (eq 1 gives positions only)
     periodic: bool = False  # true: solve the touchdown speed of a steady (repeating) cycle; see docs
     periodic_tol: float = 0.001  # m/s, |landing - touchdown speed| accepted as periodic
@@ -26,8 +26,10 @@ class HopperConfig:
     max_touchdown_speed: float = 6.0  # m/s, search range of the periodic touchdown speed
     max_stance_s: float = ranged(1.0, gt=0)  # s, a stance that has not lifted off by then is invalid
     max_flight_s: float = ranged(1.0, gt=0)  # s, a flight time T above this is invalid
-    thigh_fraction: float = 0.5  # |HIP-JOINT| / l; |JOINT-FOOT| = l - |HIP-JOINT| (paper Fig 3.3: knee mid-leg)
-    knee_max_flexion_deg: float = 150.0  # knee flexion limit; a tighter fold (d too short) is invalid
+    # |HIP-JOINT| / l; |JOINT-FOOT| = l - |HIP-JOINT| (paper Fig 3.3: knee mid-leg)
+    thigh_fraction: float = ranged(0.5, ge=0.2, le=0.5)
+    # knee flexion limit; a tighter fold (d too short) is invalid
+    knee_max_flexion_deg: float = ranged(150.0, gt=0, lt=180)
     ground_tolerance: float = 0.005  # m, a foot lower than -tolerance is "leg through the ground" -> invalid
 
 
@@ -78,10 +80,10 @@ class CharacterConfig:
 class BoundsConfig:
     """GA gene bounds [low, high] (the paper gives none; see docs/hopper-ga.md)."""
 
-    l: list[float] = field(default_factory=lambda: [0.75, 1.05])  # m, leg length (human scale)
-    kappa: list[float] = field(default_factory=lambda: [2000.0, 12000.0])  # N/m, spring constant
-    theta0: list[float] = field(default_factory=lambda: [0.1, 0.8])  # rad, touchdown angle (eq 1)
-    m: list[float] = field(default_factory=lambda: [40.0, 100.0])  # kg, HIP mass of eq 2
+    l: list[float] = ranged(factory=lambda: [0.75, 1.05], gt=0)  # m, leg length (human scale)
+    kappa: list[float] = ranged(factory=lambda: [2000.0, 12000.0], gt=0)  # N/m, spring constant
+    theta0: list[float] = ranged(factory=lambda: [0.1, 0.8], gt=0, lt=math.pi / 2)  # rad, touchdown angle (eq 1)
+    m: list[float] = ranged(factory=lambda: [40.0, 100.0], gt=0)  # kg, HIP mass of eq 2
     alpha: list[float] = field(default_factory=lambda: [0.55, 1.0])  # eq 6: extremum of B_c at alpha*T
     swing_angle: list[float] = field(default_factory=lambda: [-1.2, 0.0])  # rad, active leg theta_c at stance start
     swing_bend: list[float] = field(default_factory=lambda: [0.0, 1.2])  # rad, active leg theta_l at stance start
@@ -111,10 +113,10 @@ class FitnessConfig:
 
 @dataclass
 class GAConfig:
-    population: int = ranged(100, ge=1)  # paper Fig 5.7: 100 individuals
+    population: int = ranged(100, ge=4)  # paper Fig 5.7: 100 individuals
     generations: int = ranged(100, ge=1)  # paper Fig 5.7: 100 generations
     tournament: int = ranged(2, ge=1)  # DEAP selTournament size
-    elite: int = 2  # best individuals copied unchanged into the next generation
+    elite: int = ranged(2, ge=1)  # best individuals copied unchanged into the next generation (< population)
     cxpb: float = ranged(0.7, ge=0, le=1)  # crossover probability per pair (DEAP cxSimulatedBinaryBounded)
     mutpb: float = ranged(0.5, ge=0, le=1)  # mutation probability per individual (DEAP mutPolynomialBounded)
     cx_eta: float = 15.0  # SBX crowding degree
@@ -142,8 +144,8 @@ class RuntimeConfig:
 
 @dataclass
 class LimpConfig:
-    speed_factor: float = 1.5  # Fig 3.13: HIP speed multiplier while the limping (left) leg supports
-    cycles: int = 8  # cycles simulated for the limp test and the COM path
+    speed_factor: float = ranged(1.5, gt=0)  # Fig 3.13: HIP speed multiplier while the limping (left) leg supports
+    cycles: int = ranged(8, ge=2)  # cycles simulated for the limp test and the COM path
 
 
 @dataclass
@@ -159,7 +161,7 @@ class Config(BaseConfig):
     experiment: str = "hopper-ga"
     # m/s, target running speed = HIP speed x_dot of eq 2-3 (conceptual control parameter)
     speed: float = ranged(5.0, gt=0)
-    beta: float = 0.0  # briskness, eq 14, 0 <= beta < 1
+    beta: float = ranged(0.0, ge=0, lt=1)  # briskness, eq 14, 0 <= beta < 1
     hopper: HopperConfig = field(default_factory=HopperConfig)
     character: CharacterConfig = field(default_factory=CharacterConfig)
     balance: BalanceConfig = field(default_factory=BalanceConfig)
@@ -173,32 +175,20 @@ class Config(BaseConfig):
 
     @staticmethod
     def check(cfg) -> str | None:
-        """Cross-field checks; returns a message or None."""
-        if (msg := check_fields(cfg, Config, ranges=False)) is not None:  # declared choices (direct callers too)
+        """Cross-field checks; returns a message or None. validate has checked each field's declared choices
+        and range (charctl.config_fields.check_fields) before; they are checked here again for callers of
+        check alone."""
+        if (msg := check_fields(cfg, Config)) is not None:  # declared choices and ranges (direct callers too)
             return msg
-        for part in (_check_scalars, _check_bounds, _check_ga_and_fitness, _check_character, _check_limp_and_export):
+        for part in (_check_bounds, _check_ga, _check_character):
             if (msg := part(cfg)) is not None:
                 return msg
         return None
 
 
-def _check_scalars(cfg) -> str | None:
-    """beta, speed (m/s) and the hopper's step, gravity and leg proportions."""
-    if not 0.0 <= cfg.beta < 1.0:
-        return f"beta must satisfy 0 <= beta < 1 (eq 14), got {cfg.beta}"
-    if cfg.speed <= 0:
-        return f"speed must be positive (m/s), got {cfg.speed}"
-    if cfg.hopper.h <= 0 or cfg.hopper.g >= 0:
-        return "hopper.h must be > 0 and hopper.g < 0 (gravity points down, eq 2)"
-    if not 0.2 <= cfg.hopper.thigh_fraction <= 0.5:
-        return f"hopper.thigh_fraction must lie in [0.2, 0.5], got {cfg.hopper.thigh_fraction}"
-    if not 0 < cfg.hopper.knee_max_flexion_deg < 180:
-        return "hopper.knee_max_flexion_deg must lie in (0, 180)"
-    return None
-
-
 def _check_bounds(cfg) -> str | None:
-    """Every gene's [low, high] search bounds (theta0 and alpha in rad / fractions of T)."""
+    """Every gene's [low, high] search bounds (l, kappa, m > 0 and theta0 inside (0, pi/2) are declared on
+    the fields, for each element)."""
     for name in (
         "l",
         "kappa",
@@ -214,28 +204,16 @@ def _check_bounds(cfg) -> str | None:
         b = list(getattr(cfg.bounds, name))
         if len(b) != 2 or not b[0] < b[1]:
             return f"bounds.{name} must be [low, high] with low < high, got {b}"
-    if cfg.bounds.l[0] <= 0 or cfg.bounds.kappa[0] <= 0 or cfg.bounds.m[0] <= 0:
-        return "bounds of l, kappa and m must be positive"
     a = cfg.bounds.alpha
     if a[0] <= 0.5 <= a[1]:
         return f"bounds.alpha must not contain 0.5 (B_c of eq 6 is singular there), got {list(a)}"
-    if not 0 < cfg.bounds.theta0[1] < math.pi / 2 or cfg.bounds.theta0[0] <= 0:
-        return "bounds.theta0 must lie inside (0, pi/2)"
     return None
 
 
-def _check_ga_and_fitness(cfg) -> str | None:
-    """GA sizes and selection, worker count, fitness scales."""
-    if cfg.ga.population < 4 or cfg.ga.generations < 1:
-        return "ga.population must be >= 4 and ga.generations >= 1"
-    if not 1 <= cfg.ga.elite < cfg.ga.population:
+def _check_ga(cfg) -> str | None:
+    """Elitism against the population size (each one's own range is declared on its field)."""
+    if cfg.ga.elite >= cfg.ga.population:
         return "ga.elite must lie in [1, population) (elitism keeps the best individual)"
-    if cfg.ga.tournament < 1:
-        return "ga.tournament must be >= 1"
-    if cfg.runtime.workers < 1:
-        return "runtime.workers must be >= 1"
-    if cfg.fitness.energy_scale <= 0 or cfg.fitness.omega_floor <= 0:
-        return "fitness.energy_scale and fitness.omega_floor must be positive"
     return None
 
 
@@ -253,13 +231,4 @@ def _check_character(cfg) -> str | None:
             return f"character.upper: {s.name!r} axes must use only 'z' and 'x', got {s.axes!r}"
         if len(s.offset) != 3 or len(s.direction) != 3:
             return f"character.upper: {s.name!r} offset and direction must have 3 numbers"
-    return None
-
-
-def _check_limp_and_export(cfg) -> str | None:
-    """The limp test's speed factor and cycle count; export frame rates and length (s)."""
-    if cfg.limp.speed_factor <= 0 or cfg.limp.cycles < 2:
-        return "limp.speed_factor must be > 0 and limp.cycles >= 2"
-    if cfg.export.fps <= 0 or cfg.export.video_fps <= 0 or cfg.export.seconds <= 0:
-        return "export.fps, export.video_fps and export.seconds must be positive"
     return None

@@ -60,13 +60,13 @@ class FeatureConfig:
     future_spacing: int = ranged(25, ge=1)  # paper frames between future samples
     past_samples: int = ranged(0, ge=0)  # Table 1 cases 10-11 add the past trajectory (always worse in the paper)
     past_spacing: int = ranged(25, ge=1)  # paper frames between past samples
-    position_weight: float = 0.8  # position : velocity weights, Table 1 cases 12-15 (best 0.8:0.2)
-    velocity_weight: float = 0.2  # 0 removes the future-velocity block
-    direction_weight: float = 0.0  # future facing directions (Clavet/Holden); not in the paper -> 0
-    past_weight: float = 1.0  # weight of the past-position block when past_samples > 0
+    position_weight: float = ranged(0.8, ge=0)  # position : velocity weights, Table 1 cases 12-15 (best 0.8:0.2)
+    velocity_weight: float = ranged(0.2, ge=0)  # 0 removes the future-velocity block
+    direction_weight: float = ranged(0.0, ge=0)  # future facing directions (Clavet/Holden); not in the paper -> 0
+    past_weight: float = ranged(1.0, ge=0)  # weight of the past-position block when past_samples > 0
     # gamma: the i-th future sample's weight is gamma^(i-1) (cases 16-19, best 0.7)
     discount: float = ranged(0.7, gt=0, le=1)
-    pose_weight: float = 1.0  # weight of each pose block (root height, tilt, end points) vs trajectory
+    pose_weight: float = ranged(1.0, ge=0)  # weight of each pose block (root height, tilt, end points) vs trajectory
     end_points: list[str] = field(default_factory=lambda: ["right_ankle", "left_ankle"])  # humanoid bodies
     end_velocities: bool = True  # include end-point velocities (Clavet's foot velocities)
     # Heading of the root-local frame: the root's own yaw (paper) or its centred moving average over
@@ -99,7 +99,7 @@ class PathConfig:
     speed: float = ranged(0.9, gt=0)
     circle_radius: float = ranged(3.0, gt=0)  # m
     square_side: float = ranged(5.0, gt=0)  # m
-    star_points: int = 5  # tips of the star path
+    star_points: int = ranged(5, ge=3)  # tips of the star path
     star_outer: float = ranged(3.0, gt=0)  # m, tip radius
     star_inner: float = ranged(1.5, gt=0)  # m, radius of the inner corners
     laps: float = ranged(1.0, gt=0)  # how far the target travels: laps of a closed path (open CSV paths: to the end)
@@ -136,36 +136,16 @@ class Config(BaseConfig):
 
     @staticmethod
     def check(cfg) -> str | None:
-        """A one-line problem with the config, or None."""
-        if (msg := check_fields(cfg, Config, ranges=False)) is not None:  # declared choices (direct callers too)
+        """A one-line problem with the config, or None: the cross-field rules. validate has checked each
+        field's declared choices and range (charctl.config_fields.check_fields) before; they are checked here
+        again for callers of check alone."""
+        if (msg := check_fields(cfg, Config)) is not None:  # declared choices and ranges (direct callers too)
             return msg
-        f, r, d, p = cfg.features, cfg.runtime, cfg.data, cfg.paths
-        if f.future_samples < 1 or f.future_spacing < 1:
-            return "features.future_samples and features.future_spacing must be >= 1"
-        if f.past_samples < 0 or f.past_spacing < 1:
-            return "features.past_samples must be >= 0 and features.past_spacing >= 1"
-        if min(f.position_weight, f.velocity_weight, f.direction_weight, f.past_weight, f.pose_weight) < 0:
-            return "feature weights must be >= 0"
+        f, p = cfg.features, cfg.paths
         if f.position_weight + f.velocity_weight + f.direction_weight <= 0:
             return "at least one of features.position_weight/velocity_weight/direction_weight must be > 0"
-        if not 0 < f.discount <= 1:
-            return f"features.discount must be in (0, 1], got {f.discount}"
-        if r.search_interval < 1 or r.exclude_window < 0 or r.end_buffer < 0:
-            return "runtime.search_interval must be >= 1, exclude_window and end_buffer >= 0"
-        if r.halflife <= 0:
-            return "runtime.halflife must be > 0 (seconds)"
-        if d.fps <= 0 or cfg.frame_unit_hz <= 0:
-            return "data.fps and frame_unit_hz must be > 0"
-        if d.loop_cycles_before < 0 or d.loop_cycles_after < 1:
-            return "data.loop_cycles_before must be >= 0 and data.loop_cycles_after >= 1"
-        if p.speed <= 0 or p.laps <= 0:
-            return "paths.speed and paths.laps must be > 0"
-        if min(p.circle_radius, p.square_side, p.star_outer, p.star_inner) <= 0 or p.star_inner >= p.star_outer:
+        if p.star_inner >= p.star_outer:
             return "path sizes must be > 0 and paths.star_inner < paths.star_outer"
-        if cfg.sweep.starts < 1:
-            return "sweep.starts must be >= 1"
-        if p.star_points < 3:
-            return "paths.star_points must be >= 3"
         return None
 
 

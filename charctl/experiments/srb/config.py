@@ -123,9 +123,7 @@ class PushConfig:
     directions: list[float] = field(
         default_factory=lambda: [0.0, 90.0, 180.0, 270.0]
     )  # deg in the heading frame, 0 = forward, 90 = left
-    phases: list[float] = field(
-        default_factory=lambda: [0.0, 0.25, 0.5, 0.75]
-    )  # gait phase in [0, 1) of the push onset
+    phases: list[float] = ranged(factory=lambda: [0.0, 0.25, 0.5, 0.75], ge=0, lt=1)  # gait phase of the push onset
     trials: int = ranged(5, ge=1)  # K trials per cell (CLI -k overrides)
     settle: float = ranged(1.0, ge=0)  # s of unperturbed walking before the push window
     observe: float = ranged(2.0, gt=0)  # s after the push ends the character must stay up
@@ -176,17 +174,9 @@ class Config(BaseConfig):
 
     @staticmethod
     def check(cfg) -> str | None:
-        """Cross-field checks (called by charctl.config.validate); a message or None."""
-        if (msg := check_fields(cfg, Config, ranges=False)) is not None:  # declared choices (direct callers too)
+        """Cross-field checks (called by charctl.config.validate); a message or None. validate has checked each
+        field's declared choices and range (charctl.config_fields.check_fields) before; they are checked here
+        again for callers of check alone."""
+        if (msg := check_fields(cfg, Config)) is not None:  # declared choices and ranges (direct callers too)
             return msg
-        if (msg := check_ppo(cfg.ppo)) is not None:
-            return msg
-        if cfg.tracking.substeps < 1 or cfg.train.num_envs < 1 or cfg.train.rollout_steps < 1:
-            return "tracking.substeps, train.num_envs and train.rollout_steps must be >= 1"
-        if cfg.body.mass <= 0 or cfg.body.friction <= 0:
-            return "body.mass and body.friction must be positive"
-        if cfg.push.trials < 1:
-            return "push.trials must be >= 1"
-        if any(not 0.0 <= p < 1.0 for p in cfg.push.phases):
-            return "push.phases must lie in [0, 1)"
-        return None
+        return check_ppo(cfg.ppo)
