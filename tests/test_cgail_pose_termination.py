@@ -129,7 +129,14 @@ def test_a_heading_radius_ends_a_spin_done_without_turning():
             err, _ = env._pose_error(skills[0].obs[env.ref_frame], ref)  # hands and feet on the reference
             if env.yaw_scale > 0:
                 err, env.yaw_err = add_yaw_error(
-                    err, env.yaw_err, still, ref, env.ref_active, env.ref_grace, env.has_goal[env.cmd], 1 / 30.0,
+                    err,
+                    env.yaw_err,
+                    still,
+                    ref,
+                    env.ref_active,
+                    env.ref_grace,
+                    env.has_goal[env.cmd],
+                    1 / 30.0,
                     env.yaw_scale,
                 )
             if err[0] > env.pose_threshold:
@@ -145,7 +152,9 @@ def test_step_applies_the_heading_radius():
     skills = load_skills([SkillConfig("spindance", "dance_a")], 30.0)
     for radius, ended in ((0.0, False), (1e-4, True)):
         cfg = OmegaConf.structured(EnvConfig(num_envs=2, switch_prob=0.0))
-        env = CgailEnv(skills, cfg, seed=0, pose_error_threshold=10.0, pose_error_grace_steps=0, yaw_error_threshold=radius)
+        env = CgailEnv(
+            skills, cfg, seed=0, pose_error_threshold=10.0, pose_error_grace_steps=0, yaw_error_threshold=radius
+        )
         res = env.step(np.zeros((2, 28)))
         assert bool(res.pose_ended.all()) is ended and bool(res.terminated.all()) is ended
         assert (env.yaw_err == 0).all()  # restarted at 0: ended envs were reset, the others never counted

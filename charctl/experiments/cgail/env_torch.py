@@ -322,8 +322,15 @@ class CgailDeviceEnv:
             err, scored = self._pose_error(pair_next, ref)
             if self.yaw_scale > 0:  # reward.yaw_error_threshold: the heading gained on the reference
                 err, self.yaw_err = add_yaw_error(
-                    err, self.yaw_err, pair_next, ref, self.ref_active, self.ref_grace, self.has_goal[self.cmd],
-                    1.0 / self.cfg.control_hz, self.yaw_scale,
+                    err,
+                    self.yaw_err,
+                    pair_next,
+                    ref,
+                    self.ref_active,
+                    self.ref_grace,
+                    self.has_goal[self.cmd],
+                    1.0 / self.cfg.control_hz,
+                    self.yaw_scale,
                 )
             checked, pose_ended = pose_check(self.ref_active, self.ref_grace, fell, unstable, err, self.pose_threshold)
             if self.reference_reward:  # reward.w_track: the tracking reward where the reference is checked

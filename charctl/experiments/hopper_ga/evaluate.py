@@ -7,7 +7,7 @@ import json
 from pathlib import Path
 
 from charctl.errors import CharctlError
-from charctl.eval.report import markdown_grid
+from charctl.eval.report import markdown_grid, write_report
 from charctl.experiments.hopper_ga.results import load_best, open_hopper_run, run_dirs, write_outputs
 
 # the columns of report.md's gait table and limp table
@@ -79,8 +79,7 @@ def build_report(dirs: list[Path], out: Path | None, overrides: list[str] | None
     rows.sort(key=lambda r: (r["speed"], r["beta"]))
     print(_table(rows))
     if out:
-        path = Path(out) / "report.md"
-        path.write_text(_markdown(rows, Path(out)))
+        path = write_report(Path(out), _markdown(rows, Path(out)))
         print(f"wrote {path}")
     return rows
 

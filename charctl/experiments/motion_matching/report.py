@@ -17,6 +17,7 @@ import numpy as np
 
 from charctl.errors import CharctlError
 from charctl.eval.report import markdown_grid
+from charctl.eval.report import write_report as write_report_md
 
 # ---------------------------------------------------------------------------- report.md
 PAPER_FRAMES, PAPER_HZ = 8171, 120
@@ -260,9 +261,7 @@ def write_report(folder: Path) -> Path:
     if bench.is_file():
         lines += ["## Benchmark (scripts/bench_mm.py)", "", *bench_lines(json.loads(bench.read_text())), ""]
     lines += ["## How the database size limits the results", "", *limits(data, folder), ""]
-    out = folder / "report.md"
-    out.write_text("\n".join(lines))
-    return out
+    return write_report_md(folder, "\n".join(lines))
 
 
 def main(argv: list[str] | None = None) -> None:
