@@ -34,7 +34,7 @@ from charctl.motion.skeleton import FEET, load_skeleton
 from charctl.sim.batch import SimSettings
 from charctl.sim.humanoid import layout, load_model
 
-BACKENDS = ("cpu", "warp", "auto")
+BACKENDS = ("cpu", "warp", "torch", "auto")
 WARP_INSTALL_HINT = "install MuJoCo Warp with `pip install -e '.[gpu]'` (README, section GPU)"
 # Contacts allocated per world: the character has 5 spheres (1 contact each with the ground), 8
 # capsules (<= 2) and 2 boxes (<= 4): <= 29 at once. 48 leaves room; pyramidal cones with condim 3
@@ -49,10 +49,12 @@ def warp_available() -> bool:
 
 
 def resolve_backend(backend: str, device: str) -> str:
-    """`env.backend` -> "cpu" (C MuJoCo, numpy) or "warp" (MuJoCo Warp on `device`).
+    """`env.backend` -> "cpu" (C MuJoCo, numpy env), "warp" (MuJoCo Warp on `device`) or "torch" (C MuJoCo
+    with the torch env on the CPU, `charctl.sim.torch_view`).
 
     auto = warp when `device` is a CUDA device and MuJoCo Warp is installed, else cpu. An explicit
-    warp without MuJoCo Warp installed is a one-line CharctlError naming the install command.
+    warp without MuJoCo Warp installed, or torch with a device other than the CPU, is a one-line
+    CharctlError.
     """
     from charctl.errors import CharctlError
 
@@ -62,6 +64,8 @@ def resolve_backend(backend: str, device: str) -> str:
         return "warp" if str(device).startswith("cuda") and warp_available() else "cpu"
     if backend == "warp" and not warp_available():
         raise CharctlError(f"env.backend=warp needs MuJoCo Warp, which is not installed: {WARP_INSTALL_HINT}")
+    if backend == "torch" and torch.device(device).type != "cpu":
+        raise CharctlError(f"env.backend=torch runs on the CPU (device=cpu), got device={device}; use env.backend=warp")
     return backend
 
 
@@ -104,6 +108,8 @@ def _substeps(s: SimSettings) -> int:
 
 class WarpBatchedHumanoid:
     """`num_envs` humanoids on MuJoCo Warp; tensors are (num_envs, ...) live views on `device`."""
+
+    dtype = torch.float32  # MuJoCo Warp computes in float32
 
     def __init__(
         self,

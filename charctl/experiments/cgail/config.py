@@ -82,8 +82,9 @@ class EnvConfig:
     # (0, 0) for skills with a heading goal (their reference is the closest frame) and during a command ramp.
     # false = the paper's state (command only). docs/cgail.md, "Run H".
     phase_obs: bool = False
-    # cpu (C MuJoCo, numpy) | warp (MuJoCo Warp on `device`, README "GPU") | auto (warp on CUDA)
-    backend: Annotated[str, Literal["cpu", "warp", "auto"]] = "cpu"
+    # cpu (C MuJoCo, numpy) | warp (MuJoCo Warp on `device`, README "GPU") | torch (C MuJoCo with the torch env
+    # of the warp backend on the CPU, charctl.sim.torch_view; device=cpu) | auto (warp on CUDA)
+    backend: Annotated[str, Literal["cpu", "warp", "torch", "auto"]] = "cpu"
 
 
 @dataclass

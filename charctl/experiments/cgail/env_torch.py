@@ -1,4 +1,5 @@
-"""The cgail environment on the device: `CgailEnv`'s rules on MuJoCo Warp with torch tensors (env.backend=warp).
+"""The cgail environment in torch: `CgailEnv`'s rules on MuJoCo Warp (env.backend=warp) or, on the CPU, over
+C MuJoCo's arrays seen as tensors (env.backend=torch, `charctl.sim.torch_view.TorchBatchedHumanoid`).
 
 Same episode logic as `env.CgailEnv` (docs/cgail.md): the commanded skill B, the previous one A and
 the ramp weight w (eq 4.10), heading goals for locomotion skills, reference-state initialisation
@@ -85,8 +86,10 @@ def _pad(arrays: list[np.ndarray], device: torch.device, dtype=torch.float32) ->
 
 
 class CgailDeviceEnv:
-    """Batched multi-skill imitation env on `WarpBatchedHumanoid`; the public surface of `CgailEnv`
-    (state, obs, command_blend, cmd, prev_cmd, w, steps, step, reset, set_command) with tensors."""
+    """Batched multi-skill imitation env on `WarpBatchedHumanoid` (default) or `sim` (e.g. a
+    `TorchBatchedHumanoid`); the public surface of `CgailEnv` (state, obs, command_blend, cmd, prev_cmd,
+    w, steps, step, reset, set_command) with tensors. Features and rules run in the simulator's float
+    dtype (`sim.dtype`, float32 when absent); `state` and `obs` are float32 (the networks' inputs)."""
 
     on_device = True
 
@@ -128,9 +131,12 @@ class CgailDeviceEnv:
             device=dev,
         )
         self.device = dev = self.sim.device
+        # the simulator's float dtype: float32 on MuJoCo Warp, float64 over C MuJoCo (env.backend=torch,
+        # `charctl.sim.torch_view`); features and rules run in it, the policy state and disc obs are float32
+        self.dtype = getattr(self.sim, "dtype", torch.float32)
         self.max_steps = int(round(env_cfg.episode_seconds * env_cfg.control_hz))
         self._load_skill_tables(skills)
-        self.rest = torch.zeros(self.sim.layout.nu, dtype=torch.float32, device=dev)
+        self.rest = torch.zeros(self.sim.layout.nu, dtype=self.dtype, device=dev)
         self.state_dim = state_dim(tracking or self.phase_obs)
         self.obs_dim = self.state_dim
         self._init_env_state()
@@ -163,20 +169,21 @@ class CgailDeviceEnv:
     def _load_skill_tables(self, skills: list[SkillData]) -> None:
         """Per-skill tables on the device: RSI states and reference observations (padded to the longest clip
         with its last row), clip lengths, looping, heading goals and mean speeds (m/s)."""
-        dev = self.device
-        self.rsi_qpos = _pad([s.qpos for s in skills], dev)  # (K, T, nq)
-        self.rsi_qvel = _pad([s.qvel for s in skills], dev)  # (K, T, nv)
-        self.ref_obs = _pad([s.obs for s in skills], dev)  # (K, T, 133)
+        dev, dt = self.device, self.dtype
+        self.rsi_qpos = _pad([s.qpos for s in skills], dev, dt)  # (K, T, nq)
+        self.rsi_qvel = _pad([s.qvel for s in skills], dev, dt)  # (K, T, nv)
+        self.ref_obs = _pad([s.obs for s in skills], dev, dt)  # (K, T, 133)
         self.ref_keys = pose_keys(self.ref_obs)  # (K, T, 13): what the pose error compares
         self.clip_frames = torch.as_tensor([len(s.obs) for s in skills], dtype=torch.long, device=dev)
         self.rsi_frames = torch.as_tensor([len(s.qpos) for s in skills], dtype=torch.long, device=dev)
         self.clip_loops = torch.as_tensor([s.loop for s in skills], dtype=torch.bool, device=dev)
         self.has_goal = torch.as_tensor([s.heading_goal for s in skills], dtype=torch.bool, device=dev)
-        self.speed = torch.as_tensor([s.mean_speed for s in skills], dtype=torch.float32, device=dev)
+        self.speed = torch.as_tensor([s.mean_speed for s in skills], dtype=dt, device=dev)
 
     # ------------------------------------------------------------------ random numbers
     def _rand(self) -> torch.Tensor:
-        return torch.rand(self.N, generator=self.generator, device=self.device)
+        """(N,) uniform in [0, 1), in the simulator's dtype."""
+        return torch.rand(self.N, generator=self.generator, device=self.device, dtype=self.dtype)
 
     def _randint(self, high: torch.Tensor | int) -> torch.Tensor:
         """(N,) integers uniform in [0, high) (high a scalar or per-env tensor >= 1)."""
@@ -222,7 +229,11 @@ class CgailDeviceEnv:
             frames = torch.minimum(torch.full_like(frames, int(self.start_frame)), n_rsi - 1)
         qpos = self.rsi_qpos[skill, frames].clone()
         qvel = self.rsi_qvel[skill, frames].clone()
-        yaw = (2.0 * self._rand() - 1.0) * math.pi if self.random_yaw else torch.zeros(self.N, device=self.device)
+        yaw = (
+            (2.0 * self._rand() - 1.0) * math.pi
+            if self.random_yaw
+            else torch.zeros(self.N, dtype=self.dtype, device=self.device)
+        )
         turn = RT.heading_quat(yaw)
         qpos[:, 0] = 0.0
         qpos[:, 2] = 0.0
@@ -241,7 +252,7 @@ class CgailDeviceEnv:
         k = sim_kinematics(self.sim)
         self._new_goal(mask, k.body_rot[:, 0])
         m = mask[:, None]
-        state, obs = self._features(k)
+        state, obs = (x.float() for x in self._features(k))
         self._state = torch.where(m, state, self._state)
         self._obs = torch.where(m, obs, self._obs)
 
@@ -302,7 +313,7 @@ class CgailDeviceEnv:
     def step(self, actions: torch.Tensor, force=None, force_substeps: int = 0) -> DeviceStepResult:
         """Apply PD targets rest + action_scale * actions (radians) for one control step; `force`
         (N, nbody, 6) world-frame push held for the first `force_substeps` physics substeps."""
-        targets = self.rest + self.cfg.action_scale * torch.as_tensor(actions, dtype=torch.float32, device=self.device)
+        targets = self.rest + self.cfg.action_scale * torch.as_tensor(actions, dtype=self.dtype, device=self.device)
         unstable = self.sim.step(targets, force=force, force_substeps=force_substeps)
         k = sim_kinematics(self.sim)
         zeros = torch.zeros(self.N, device=self.device)
@@ -343,7 +354,8 @@ class CgailDeviceEnv:
             self.fall_rate = update_fall_rates(
                 self.fall_rate, self.cmd, done, fell | pose_ended, self.cfg.skill_fall_halflife
             )
-        self._state, self._obs = final_state, pair_next
+        # the networks' inputs in float32 (a no-op on MuJoCo Warp; over C MuJoCo the cast the numpy path makes)
+        self._state, self._obs = final_state, pair_next = final_state.float(), pair_next.float()
         self._advance_ramp()
         if self.timed_reference:
             self._restart_reference_after_ramp()

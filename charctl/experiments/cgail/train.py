@@ -29,6 +29,15 @@ from charctl.rl.runner import AgentCounters, crossed_multiple
 
 
 # ---------------------------------------------------------------------------- the learner
+def _torch_cpu_sim(env_cfg):
+    """env.backend=torch: C MuJoCo (`BatchedHumanoid`) seen as torch tensors on the CPU, for `CgailDeviceEnv`."""
+    from charctl.sim.batch import SimSettings
+    from charctl.sim.torch_view import TorchBatchedHumanoid
+
+    settings = SimSettings(physics_hz=env_cfg.physics_hz, control_hz=env_cfg.control_hz, armature=env_cfg.armature)
+    return TorchBatchedHumanoid(int(env_cfg.num_envs), settings)
+
+
 def _synchronize(device: str) -> None:
     """Wait for queued CUDA work (no-op on the CPU), so wall-clock phase timings are attributed correctly."""
     if torch.device(device).type == "cuda":
@@ -46,7 +55,7 @@ class CgailLearner(AgentCounters):
         torch.set_num_threads(int(cfg.train.torch_threads))
         self.cfg = cfg
         self.device = resolve_device(str(cfg.device))  # auto -> cuda when available, else cpu
-        self.backend = resolve_backend(str(getattr(cfg.env, "backend", "cpu")), self.device)  # cpu | warp
+        self.backend = resolve_backend(str(getattr(cfg.env, "backend", "cpu")), self.device)  # cpu | warp | torch
         self.agent = build_agent(cfg, self.device)
         env_class = CgailEnv
         env_args = dict(
@@ -59,15 +68,17 @@ class CgailLearner(AgentCounters):
             yaw_error_threshold=cfg.reward.yaw_error_threshold,
             reference_reward=cfg.reward.w_track > 0,
         )
-        if self.backend == "warp":  # MuJoCo Warp on the same device: rollout never leaves it
+        if self.backend in ("warp", "torch"):
             from charctl.experiments.cgail.env_torch import CgailDeviceEnv
-
+        if self.backend == "warp":  # MuJoCo Warp on the same device: rollout never leaves it
             env_class, env_args["device"] = CgailDeviceEnv, self.device
+        elif self.backend == "torch":  # the same torch env on the CPU over C MuJoCo's arrays (no copies)
+            env_class, env_args["device"], env_args["sim"] = CgailDeviceEnv, "cpu", _torch_cpu_sim(cfg.env)
         self.env = env_class(self.agent.skills, cfg.env, **env_args)
         self.samples_per_iteration = cfg.train.rollout_steps * self.env.N
         self.episode_lengths: list = []
         self.rng = np.random.default_rng(cfg.seed + 7919)
-        self.overlap = bool(cfg.train.overlap_update) and self.backend == "cpu"
+        self.overlap = bool(cfg.train.overlap_update) and self.backend in ("cpu", "torch")  # not on a GPU
         # overlap: the rollout acts with this copy (the policy as of the last finished update) while the
         # worker thread updates self.agent.model; `pending` is the rollout the next update consumes
         self.acting = dataclasses.replace(self.agent, model=copy.deepcopy(self.agent.model)) if self.overlap else None

@@ -1,0 +1,163 @@
+"""env.backend=torch: the torch env (`CgailDeviceEnv`) on the CPU over C MuJoCo's arrays
+(`charctl.sim.torch_view.TorchBatchedHumanoid`).
+
+The adapter's raw arrays share memory with MuJoCo's (no copies) and its interface gives the numpy
+simulator's numbers; the torch env over it gives the numpy env's (`CgailEnv`) state, observation,
+rewards and episode ends after a reset and one step from the same states, with the tolerances of the
+Warp env's check (`tests/test_gpu_path.py`; here both sides run C MuJoCo in float64, so the actual
+differences are far below them); a smoke-scale `charctl train cgail env.backend=torch` completes
+(slow, `make test-slow`).
+"""
+
+from __future__ import annotations
+
+import os
+
+import numpy as np
+import pytest
+import torch
+
+from conftest import REPO, cli_env, run_charctl
+
+
+def _np(x: torch.Tensor) -> np.ndarray:
+    return x.detach().cpu().numpy()
+
+
+def _rsi_states(n: int = 6) -> tuple[np.ndarray, np.ndarray]:
+    """`n` RSI states of the walk clip, some dropped onto the ground."""
+    from charctl.motion.library import load_clip
+    from charctl.sim.humanoid import clip_to_qpos_qvel
+
+    q, v = clip_to_qpos_qvel(load_clip("walk").resample(30.0))
+    idx = np.linspace(0, len(q) - 2, n).astype(int)
+    qpos, qvel = q[idx].copy(), v[idx].copy()
+    qpos[::3, 1] = 0.12
+    return qpos, qvel
+
+
+def test_adapter_views_mujoco_arrays_and_matches_the_numpy_simulator():
+    """Raw arrays are views (a write on either side shows on the other); the derived quantities, the mask
+    and integer forms of set_state and a step equal BatchedHumanoid's on the same states and targets."""
+    from charctl.experiments.cgail import features as F
+    from charctl.experiments.cgail.warp_kinematics import sim_kinematics
+    from charctl.sim.batch import BatchedHumanoid
+    from charctl.sim.torch_view import TorchBatchedHumanoid
+
+    qpos, qvel = _rsi_states()
+    n = len(qpos)
+    ref, sim = BatchedHumanoid(n), TorchBatchedHumanoid(n)
+    for name in ("qpos", "qvel", "ctrl", "xfrc_applied", "xpos", "xquat", "cvel", "subtree_com", "geom_xpos"):
+        assert np.shares_memory(getattr(sim, name).numpy(), getattr(sim.base, name)), name
+    assert np.shares_memory(sim.geom_xmat.numpy(), sim.base.geom_xmat)
+    ref.set_state(np.arange(n), qpos, qvel)
+    mask = torch.zeros(n, dtype=torch.bool)
+    mask[::2] = True
+    sim.set_state(mask, torch.from_numpy(qpos), torch.from_numpy(qvel))  # masked rows from full-size inputs
+    sim.set_state(torch.arange(1, n, 2), qpos[1::2], qvel[1::2])  # integer ids with their rows
+    sim.set_state(torch.zeros(n, dtype=torch.bool), qpos * np.nan, qvel)  # an all-false mask writes nothing
+    targets = np.random.default_rng(0).normal(scale=0.2, size=(n, sim.layout.nu))
+    bad_ref, bad = ref.step(targets), sim.step(torch.from_numpy(targets))
+    assert bad.dtype == torch.bool and np.array_equal(_np(bad), bad_ref)
+    np.testing.assert_array_equal(_np(sim.qpos), ref.qpos)
+    k_np, k_t = F.sim_kinematics(ref), sim_kinematics(sim)
+    for field in ("body_pos", "body_rot", "lin_vel", "ang_vel", "com", "com_vel"):
+        np.testing.assert_allclose(_np(getattr(k_t, field)), getattr(k_np, field), atol=1e-12, err_msg=field)
+    np.testing.assert_array_equal(_np(sim.non_foot_ground_contact()), ref.non_foot_ground_contact())
+    assert sim.dtype == torch.float64 and sim.total_mass == pytest.approx(float(ref.model.body_subtreemass[1]))
+
+
+def test_backend_torch_is_accepted_on_the_cpu_only():
+    from charctl.config import compose_config
+    from charctl.errors import CharctlError
+    from charctl.experiments.cgail.config import Config
+    from charctl.sim.warp_batch import resolve_backend
+
+    assert compose_config("cgail", ["scale=smoke", "env.backend=torch"], Config).env.backend == "torch"
+    assert resolve_backend("torch", "cpu") == "torch"
+    with pytest.raises(CharctlError, match="env.backend=torch"):
+        resolve_backend("torch", "cuda")
+
+
+@pytest.mark.parametrize("fidelity", [False, True], ids=["default", "phase-pose-track"])
+def test_torch_env_on_cpu_gives_the_numpy_env_observations(fidelity):
+    """Same skill, same RSI frame, no random yaw, goal straight ahead: the torch env over the adapter gives
+    the numpy env's state, obs, rewards and episode ends after reset and after one step with the same
+    actions; with the fidelity recipe's env rules too (env.phase_obs, the pose-error check, r_track there).
+    Tolerances of test_gpu_path's Warp check."""
+    from omegaconf import OmegaConf
+
+    from charctl.config import compose_config
+    from charctl.experiments.cgail.config import Config
+    from charctl.experiments.cgail.env import CgailEnv
+    from charctl.experiments.cgail.env_torch import CgailDeviceEnv
+    from charctl.experiments.cgail.skills import load_skills, select_skills
+    from charctl.sim.torch_view import TorchBatchedHumanoid
+
+    overrides = ["scale=smoke", "env.num_envs=4", "env.goal_max_angle_deg=0", "env.switch_prob=0"]
+    cfg = compose_config("cgail", overrides + (["env.phase_obs=true"] if fidelity else []), Config)
+    skills = load_skills(select_skills(cfg), cfg.env.control_hz)
+    env_cfg = OmegaConf.to_object(cfg.env)
+    forced = np.array([0, 1, 0, 1])
+    rules = dict(pose_error_threshold=0.10, pose_error_grace_steps=0, reference_reward=True) if fidelity else {}
+    c_env = CgailEnv(skills, env_cfg, seed=0, **rules)
+    t_env = CgailDeviceEnv(skills, env_cfg, seed=0, device="cpu", sim=TorchBatchedHumanoid(4), **rules)
+    c_env.forced_command, t_env.forced_command = forced, torch.as_tensor(forced)
+    for env in (c_env, t_env):
+        env.start_frame, env.random_yaw = 5, False
+    c_env.reset(np.arange(4))
+    t_env.reset(torch.ones(4, dtype=torch.bool))
+    assert t_env.state.dtype == torch.float32 and t_env.obs.dtype == torch.float32
+    np.testing.assert_allclose(_np(t_env.state), c_env.state, atol=2e-4)
+    np.testing.assert_allclose(_np(t_env.obs), c_env.obs, atol=2e-4)
+    actions = np.random.default_rng(0).normal(scale=0.1, size=(4, 28)).astype(np.float32).astype(np.float64)
+    c_res, t_res = c_env.step(actions), t_env.step(torch.as_tensor(actions, dtype=torch.float32))
+    np.testing.assert_allclose(_np(t_res.pair_next), c_res.pair_next, atol=2e-3)
+    np.testing.assert_allclose(_np(t_res.final_state), c_res.final_state, atol=2e-3)
+    np.testing.assert_allclose(_np(t_res.state), c_res.state, atol=2e-3)
+    np.testing.assert_allclose(_np(t_res.r_goal), c_res.r_goal, atol=1e-3)
+    np.testing.assert_array_equal(_np(t_res.terminated), c_res.terminated)
+    np.testing.assert_array_equal(_np(t_res.truncated), c_res.truncated)
+    np.testing.assert_array_equal(_np(t_res.unstable), c_res.unstable)
+    np.testing.assert_allclose(_np(t_env.command_blend()), c_env.command_blend(), atol=1e-7)
+    if fidelity:
+        assert c_env.state_dim == t_env.state_dim == 245  # the phase is in the state
+        np.testing.assert_array_equal(_np(t_res.pose_ended), c_res.pose_ended)
+        assert c_res.pose_ended.any() and not c_res.pose_ended.all(), c_res.pose_ended
+        np.testing.assert_allclose(_np(t_res.r_track), c_res.r_track, atol=2e-3)
+        assert (c_res.r_track > 0).any()
+
+
+FIDELITY_ENV_RULES = (
+    "env.phase_obs=true",
+    "reward.pose_error_threshold=0.5",
+    "reward.w_track=1.0",
+    "reward.low_style_threshold=0.05",
+    "env.skill_fall_weight=0.5",
+)
+
+
+@pytest.mark.slow
+def test_smoke_training_with_the_torch_backend(tmp_path):
+    """`charctl train cgail scale=smoke env.backend=torch device=cpu` with the fidelity recipe's env rules and
+    the overlapped loop completes, and its checkpoint loads with the CPU evaluation code."""
+    from charctl.experiments.cgail.policy import load_trained_run
+
+    env = cli_env(PYTHONPATH=os.pathsep.join(filter(None, [str(REPO), os.environ.get("PYTHONPATH", "")])))
+    res = run_charctl(
+        "train",
+        "cgail",
+        "scale=smoke",
+        "env.backend=torch",
+        "train.overlap_update=true",
+        *FIDELITY_ENV_RULES,
+        "device=cpu",
+        f"output_root={tmp_path}",
+        env=env,
+        timeout=900,
+    )
+    assert res.returncode == 0, res.stdout + res.stderr
+    assert "done: iterations=4" in res.stdout
+    (run_dir,) = (tmp_path / "cgail").iterdir()
+    run = load_trained_run(run_dir)
+    assert run.agent.samples == 512 and run.agent.model.obs_dim == 245  # 241 features + goal + phase
