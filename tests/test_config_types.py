@@ -107,7 +107,7 @@ def test_ranged_needs_a_bound_and_one_default():
 # every string-choice field of the experiments (each was a hand-written check before): a wrong value is
 # the one-line error naming the key and its choices
 CHOICES = [
-    ("cgail", "env.backend", "cpu, warp, auto"),
+    ("cgail", "env.backend", "cpu, warp, torch, auto"),
     ("cgail", "reward.class_form", "l1, prob, logratio"),
     ("cgail", "reward.kind", "adversarial, tracking"),
     ("cgail", "disc.style_head", "shared, per_skill"),
