@@ -56,6 +56,37 @@ def cgail_paper_recipe() -> list[str]:
     return body.replace("\\\n", " ").split()
 
 
+# the fidelity recipe's env rules, for the parity and smoke tests of the torch envs (Warp, torch on the CPU)
+FIDELITY_ENV_RULES = (
+    "env.phase_obs=true",
+    "reward.pose_error_threshold=0.5",
+    "reward.w_track=1.0",
+    "reward.low_style_threshold=0.05",
+    "env.skill_fall_weight=0.5",
+)
+
+
+def assert_step_matches_cpu_env(c_env, c_res, t_env, t_res, fidelity: bool) -> None:
+    """A torch env's step (`t_res`, tensors) equals the numpy `CgailEnv`'s (`c_res`) after the same actions: next
+    disc obs and state before resets (float32 rounding, 2e-3), goal reward, terminations, the command blend and,
+    with the fidelity rules, the phase in the state, the pose ends (some, not all) and r_track (some > 0)."""
+
+    def npy(x):
+        return x.detach().cpu().numpy()
+
+    np.testing.assert_allclose(npy(t_res.pair_next), c_res.pair_next, atol=2e-3)
+    np.testing.assert_allclose(npy(t_res.final_state), c_res.final_state, atol=2e-3)
+    np.testing.assert_allclose(npy(t_res.r_goal), c_res.r_goal, atol=1e-3)
+    np.testing.assert_array_equal(npy(t_res.terminated), c_res.terminated)
+    np.testing.assert_allclose(npy(t_env.command_blend()), c_env.command_blend(), atol=1e-7)
+    if fidelity:
+        assert c_env.state_dim == t_env.state_dim == 245  # the phase is in the state
+        np.testing.assert_array_equal(npy(t_res.pose_ended), c_res.pose_ended)
+        assert c_res.pose_ended.any() and not c_res.pose_ended.all(), c_res.pose_ended
+        np.testing.assert_allclose(npy(t_res.r_track), c_res.r_track, atol=2e-3)
+        assert (c_res.r_track > 0).any()
+
+
 def cli_env(**extra: str) -> dict[str, str]:
     """Environment for a charctl subprocess: wide, colourless rich output, no GPU/renderer surprises;
     CHARCTL_FAULT_* variables in `extra` switch the test-only checkpoint faults on (`with_fault_hooks`)."""

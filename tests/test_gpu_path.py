@@ -21,7 +21,7 @@ import numpy as np
 import pytest
 import torch
 
-from conftest import run_charctl
+from conftest import FIDELITY_ENV_RULES, assert_step_matches_cpu_env, run_charctl
 
 # Body-position tolerance (m) of MuJoCo Warp (float32) vs C MuJoCo (float64) after k control steps
 # (10 physics substeps each). Measured on Warp's CPU device: 3.5e-7, 9.1e-6, 4.3e-5 m (README "GPU").
@@ -312,26 +312,7 @@ def test_device_env_gives_the_cpu_env_observations(warp_sim_factory, fidelity):
     np.testing.assert_allclose(_np(w_env.obs), c_env.obs, atol=2e-4)
     actions = np.random.default_rng(0).normal(scale=0.1, size=(4, 28))
     c_res, w_res = c_env.step(actions), w_env.step(torch.as_tensor(actions, dtype=torch.float32))
-    np.testing.assert_allclose(_np(w_res.pair_next), c_res.pair_next, atol=2e-3)
-    np.testing.assert_allclose(_np(w_res.final_state), c_res.final_state, atol=2e-3)
-    np.testing.assert_allclose(_np(w_res.r_goal), c_res.r_goal, atol=1e-3)
-    np.testing.assert_array_equal(_np(w_res.terminated), c_res.terminated)
-    np.testing.assert_allclose(_np(w_env.command_blend()), c_env.command_blend(), atol=1e-7)
-    if fidelity:
-        assert c_env.state_dim == w_env.state_dim == 245  # the phase is in the state
-        np.testing.assert_array_equal(_np(w_res.pose_ended), c_res.pose_ended)
-        assert c_res.pose_ended.any() and not c_res.pose_ended.all(), c_res.pose_ended
-        np.testing.assert_allclose(_np(w_res.r_track), c_res.r_track, atol=2e-3)
-        assert (c_res.r_track > 0).any()
-
-
-FIDELITY_ENV_RULES = (
-    "env.phase_obs=true",
-    "reward.pose_error_threshold=0.5",
-    "reward.w_track=1.0",
-    "reward.low_style_threshold=0.05",
-    "env.skill_fall_weight=0.5",
-)
+    assert_step_matches_cpu_env(c_env, c_res, w_env, w_res, fidelity)
 
 
 @pytest.mark.slow

@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 import torch
 
-from conftest import REPO, cli_env, run_charctl
+from conftest import FIDELITY_ENV_RULES, REPO, assert_step_matches_cpu_env, cli_env, run_charctl
 
 
 def _np(x: torch.Tensor) -> np.ndarray:
@@ -112,29 +112,10 @@ def test_torch_env_on_cpu_gives_the_numpy_env_observations(fidelity):
     np.testing.assert_allclose(_np(t_env.obs), c_env.obs, atol=2e-4)
     actions = np.random.default_rng(0).normal(scale=0.1, size=(4, 28)).astype(np.float32).astype(np.float64)
     c_res, t_res = c_env.step(actions), t_env.step(torch.as_tensor(actions, dtype=torch.float32))
-    np.testing.assert_allclose(_np(t_res.pair_next), c_res.pair_next, atol=2e-3)
-    np.testing.assert_allclose(_np(t_res.final_state), c_res.final_state, atol=2e-3)
+    assert_step_matches_cpu_env(c_env, c_res, t_env, t_res, fidelity)
     np.testing.assert_allclose(_np(t_res.state), c_res.state, atol=2e-3)
-    np.testing.assert_allclose(_np(t_res.r_goal), c_res.r_goal, atol=1e-3)
-    np.testing.assert_array_equal(_np(t_res.terminated), c_res.terminated)
     np.testing.assert_array_equal(_np(t_res.truncated), c_res.truncated)
     np.testing.assert_array_equal(_np(t_res.unstable), c_res.unstable)
-    np.testing.assert_allclose(_np(t_env.command_blend()), c_env.command_blend(), atol=1e-7)
-    if fidelity:
-        assert c_env.state_dim == t_env.state_dim == 245  # the phase is in the state
-        np.testing.assert_array_equal(_np(t_res.pose_ended), c_res.pose_ended)
-        assert c_res.pose_ended.any() and not c_res.pose_ended.all(), c_res.pose_ended
-        np.testing.assert_allclose(_np(t_res.r_track), c_res.r_track, atol=2e-3)
-        assert (c_res.r_track > 0).any()
-
-
-FIDELITY_ENV_RULES = (
-    "env.phase_obs=true",
-    "reward.pose_error_threshold=0.5",
-    "reward.w_track=1.0",
-    "reward.low_style_threshold=0.05",
-    "env.skill_fall_weight=0.5",
-)
 
 
 @pytest.mark.slow
