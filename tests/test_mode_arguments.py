@@ -7,7 +7,8 @@ disk: the output folder the command was pointed at stays absent, and nothing app
 used to fail only after a first file was written: an unknown sweep case (config.yaml in -o), a second
 hopper-ga run without a checkpoint (the first run's figures), the web demo of a tracking run (the ONNX
 file), --fps on a BVH-folder skeleton (a new run directory), a missing --checkpoint with --curves, a sweep's
-missing data.bvh_dir, unknown clip or too low data.fps (config.yaml in -o, or a new run directory).
+missing data.bvh_dir, unknown clip or too low data.fps (config.yaml in -o, or a new run directory), and a
+sweep case whose database has too few searchable frames (config.yaml in -o, after the cases before it ran).
 
 On a machine that cannot render, the modes that render (`NO_RENDER`) give their one-line error before
 anything is written: it used to come after com-cnn's CSV, plot and BVH, hopper-ga's BVH and
@@ -62,6 +63,12 @@ MODES = [
         "eval-mm-sweep-clips",
         "eval motion-matching --sweep scale=smoke output_root={tmp}/runs data.clips=[nosuch_clip]",
         ["nosuch_clip"],
+    ),
+    (  # case 1 has 11 searchable frames, case 10 (2 past samples) 1: the sweep used to run case 1 first
+        "eval-mm-sweep-searchable",
+        "eval motion-matching --sweep scale=smoke output_root={tmp}/runs sweep.cases=[1,10] data.clips=[kick] "
+        "data.mirror=false runtime.end_buffer=140 -o {out}",
+        ["1 searchable frames"],
     ),
     (
         "eval-mm-sweep-fps",

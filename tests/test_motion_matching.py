@@ -288,6 +288,26 @@ def test_config_errors_are_one_line():
         smoke_cfg("features.discount=0")
 
 
+def test_searchable_frames_are_counted_without_building_the_database():
+    """check_searchable (the sweep's check before it writes) counts what build_database would search, and
+    gives build_database's one-line error for fewer than 2 frames."""
+    from charctl.experiments.motion_matching.cases import with_case
+    from charctl.experiments.motion_matching.database import build_database, check_searchable
+    from charctl.experiments.motion_matching.sources import load_sources
+
+    cfg = smoke_cfg("data.clips=[kick]", "data.mirror=false", "runtime.end_buffer=140")
+    sources, info = load_sources(cfg)
+    for case in (1, 8):
+        ccfg = with_case(cfg, case)
+        assert check_searchable(ccfg, sources) == build_database(ccfg, sources, info).num_searchable >= 2
+    ccfg = with_case(cfg, 10)  # 2 past samples leave one searchable frame
+    with pytest.raises(CharctlError) as built:
+        build_database(ccfg, sources, info)
+    with pytest.raises(CharctlError) as counted:
+        check_searchable(ccfg, sources)
+    assert str(counted.value) == str(built.value) and "1 searchable frames" in str(built.value)
+
+
 # ---------------------------------------------------------------------------- Table 1 and end to end
 def test_table1_cases():
     from charctl.experiments.motion_matching.cases import TABLE1, describe, with_case

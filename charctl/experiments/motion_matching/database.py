@@ -139,11 +139,7 @@ def build_database(cfg, sources: list[SourceMotion] | None = None, info: Skeleto
     starts = stops - lengths
     searchable = cat.pop("searchable")
     search_rows = np.flatnonzero(searchable & cat["valid"])
-    if search_rows.size < 2:
-        raise CharctlError(
-            f"the database has {search_rows.size} searchable frames: clips are shorter than the "
-            "feature horizon (lower features.future_samples/spacing or add longer clips)"
-        )
+    _require_searchable(search_rows.size)
     block_names, block_dims = zip(*per_clip[0]["blocks"])
     raw = cat.pop("raw")
     layout = _layout(raw[search_rows], block_names, block_dims, cfg, fut, past)
@@ -174,6 +170,29 @@ def build_database(cfg, sources: list[SourceMotion] | None = None, info: Skeleto
     )
 
 
+def check_searchable(cfg, sources: list[SourceMotion]) -> int:
+    """The number of searchable frames build_database(cfg, sources) would have, counted without computing
+    any feature (so a sweep can check every case before it writes); fewer than 2 is build_database's
+    one-line error."""
+    fut, past = feature_offsets(cfg)
+    count = 0
+    for s in sources:
+        t = np.arange(s.root_pos.shape[0])
+        searchable, _ = _searchable_and_phase(s, cfg, t)
+        count += int(np.count_nonzero(searchable & _full_horizon(t, fut, past)))
+    _require_searchable(count)
+    return count
+
+
+def _require_searchable(count: int) -> None:
+    """A database needs at least 2 searchable frames; fewer is a one-line error."""
+    if count < 2:
+        raise CharctlError(
+            f"the database has {count} searchable frames: clips are shorter than the "
+            "feature horizon (lower features.future_samples/spacing or add longer clips)"
+        )
+
+
 # ---------------------------------------------------------------------------- per clip
 def _clip_arrays(s: SourceMotion, info: SkeletonInfo, cfg, fut: np.ndarray, past: np.ndarray) -> dict:
     """Frames, playback data and raw features of one clip, vectorised over its frames."""
@@ -188,7 +207,7 @@ def _clip_arrays(s: SourceMotion, info: SkeletonInfo, cfg, fut: np.ndarray, past
     t = np.arange(T)
     step_local, step_heading = _playback_steps(ground, heading, t)
     blocks = _feature_blocks(s, info, cfg, ground, heading, rel_root, t, fut, past)
-    valid = (t + fut.max() <= T - 1) & (t - (past.max() if past.size else 0) >= 0)
+    valid = _full_horizon(t, fut, past)
     searchable, phase = _searchable_and_phase(s, cfg, t)
     return {
         "ground": ground,
@@ -257,6 +276,12 @@ def _feature_blocks(
         pidx = np.maximum(t[:, None] - past[None], 0)
         blocks.append(("past_pos", rotate_ground(ground[pidx] - ground[:, None], h_loc).reshape(T, -1)))
     return blocks
+
+
+def _full_horizon(t: np.ndarray, fut: np.ndarray, past: np.ndarray) -> np.ndarray:
+    """True for the frames `t` of a clip (of len(t) frames) whose whole future (`fut`) and past
+    (`past`) sample offsets lie inside the clip."""
+    return (t + fut.max() <= len(t) - 1) & (t - (past.max() if past.size else 0) >= 0)
 
 
 def _searchable_and_phase(s: SourceMotion, cfg, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

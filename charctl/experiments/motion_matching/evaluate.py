@@ -29,9 +29,11 @@ def evaluate(targets: list[str], options: dict, overrides: list[str]) -> None:
     if not options.get("sweep"):
         raise CharctlError("motion-matching evaluates with --sweep (the Table 1 feature study)")
     cfg = load_config(targets, overrides)
-    # every case, path and source (data.bvh_dir or data.clips) checked before the output folder is made
+    # every case, path and source (data.bvh_dir or data.clips), and each case's database size, checked
+    # before the output folder is made
     cases, paths = sweep_plan(cfg)
     sources = load_sources(cfg)
+    check_databases(cfg, cases, sources[0])
     out = output_dir(cfg, options.get("out"))
     with TrainingProgress(len(cases), "Table 1 sweep", unit="cases") as bar:
         payload = run_sweep(
@@ -73,6 +75,15 @@ def sweep_plan(cfg) -> tuple[list[int], dict]:
     for case in cases:
         feature_offsets(with_case(cfg, case))
     return cases, {p: make_path(p, cfg.paths) for p in cfg.sweep.paths}
+
+
+def check_databases(cfg, cases: list[int], sources: list[SourceMotion]) -> None:
+    """Each case's database (built from `sources`) would have at least 2 searchable frames; the first case
+    that would not is build_database's one-line error, given here before anything is built or written."""
+    from charctl.experiments.motion_matching.database import check_searchable
+
+    for case in cases:
+        check_searchable(with_case(cfg, case), sources)
 
 
 def run_sweep(
