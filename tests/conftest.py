@@ -87,6 +87,42 @@ def assert_step_matches_cpu_env(c_env, c_res, t_env, t_res, fidelity: bool) -> N
         assert (c_res.r_track > 0).any()
 
 
+def assert_config_value_refused(experiment: str, key: str, value: str, message: str) -> BaseException:
+    """The override `key=value` is refused when `experiment`'s config is composed (scale=smoke) with exactly
+    'invalid config for EXPERIMENT: MESSAGE', and the schema's check alone (tests and tools call it directly),
+    on the schema's defaults with `key` set to `value` read as YAML, returns MESSAGE. Returns the composition's
+    CharctlError."""
+    import yaml
+    from omegaconf import OmegaConf
+
+    from charctl.config import compose_config
+    from charctl.errors import CharctlError
+    from charctl.experiments import load
+
+    schema = load(experiment).config_class()
+    with pytest.raises(CharctlError) as exc:
+        compose_config(experiment, ["scale=smoke", f"{key}={value}"], schema)
+    assert str(exc.value) == f"invalid config for {experiment}: {message}"
+    section, _, name = key.rpartition(".")
+    values = {section: {name: yaml.safe_load(value)}} if section else {name: yaml.safe_load(value)}
+    assert schema.check(OmegaConf.merge(OmegaConf.structured(schema), values)) == message
+    return exc.value
+
+
+# com-cnn shrunk for the tests that train it (test_com_cnn, test_eval_checkpoints): two clips, the turn held out,
+# a 15-frame history, a small network, Adam at 3e-3; each test adds its steps and output_root
+TINY_COM_CNN = (
+    "scale=smoke",
+    "data.clips=[walk,walker/turn_right1]",
+    "data.test_clips=[walker/turn_right1]",
+    "data.history=15",
+    "model.kernel=2",
+    "model.channels=[8,16,32]",
+    "train.optimizer=adam",
+    "train.lr=0.003",
+)
+
+
 def cli_env(**extra: str) -> dict[str, str]:
     """Environment for a charctl subprocess: wide, colourless rich output, no GPU/renderer surprises;
     CHARCTL_FAULT_* variables in `extra` switch the test-only checkpoint faults on (`with_fault_hooks`)."""

@@ -11,7 +11,7 @@ import pytest
 from charctl.errors import CharctlError
 from charctl.motion import rotations as R
 
-from conftest import assert_one_line, assert_one_line_error
+from conftest import TINY_COM_CNN, assert_one_line, assert_one_line_error
 
 torch = pytest.importorskip("torch")
 torch.set_num_threads(1)
@@ -237,18 +237,7 @@ def test_tiny_training_run_lowers_the_loss_and_resumes(tmp_path):
     from charctl.experiments.com_cnn.train import BatchSource, normalizer_stats, teacher_forced, train
     from charctl.runs import new_run, open_run
 
-    cfg = compose(
-        "scale=smoke",
-        "data.clips=[walk,walker/turn_right1]",
-        "data.test_clips=[walker/turn_right1]",
-        "data.history=15",
-        "model.kernel=2",
-        "model.channels=[8,16,32]",
-        "train.steps=150",
-        "train.optimizer=adam",
-        "train.lr=0.003",
-        f"output_root={tmp_path}",
-    )
+    cfg = compose(*TINY_COM_CNN, "train.steps=150", f"output_root={tmp_path}")
     run = new_run(cfg)
     metrics = train(cfg, run)
     run.close()

@@ -17,7 +17,7 @@ import pytest
 from charctl.errors import CharctlError
 from charctl.eval.report import fmt_cell
 
-from conftest import assert_one_line, assert_one_line_error, snapshot
+from conftest import TINY_COM_CNN, assert_one_line, assert_one_line_error, snapshot
 
 torch = pytest.importorskip("torch")
 
@@ -33,16 +33,9 @@ def com_cnn_run(tmp_path_factory) -> Path:
     (run_dir,) = train_command(
         "com-cnn",
         [
-            "scale=smoke",
-            "data.clips=[walk,walker/turn_right1]",
-            "data.test_clips=[walker/turn_right1]",
-            "data.history=15",
-            "model.kernel=2",
-            "model.channels=[8,16,32]",
+            *TINY_COM_CNN,
             "train.steps=30",
             "train.batch_size=16",
-            "train.optimizer=adam",
-            "train.lr=0.003",
             "train.checkpoint_every=10",
             "train.keep_checkpoint_every=160",
             f"output_root={root}",
