@@ -5,8 +5,9 @@
   The first case of each command (`train cgail`, `train cgail -m`, `eval RUN`, `export bvh`, ...) and
   every case that sets its own environment run as a subprocess; the others call `charctl.cli.main` in
   the test process (same parsing, validation and one-line errors, without an interpreter start-up each);
-- Ctrl-C once or twice and SIGTERM: exit 130 / 143, "interrupted at ...", a loadable checkpoint,
-  also when the second Ctrl-C lands inside the checkpoint write;
+- Ctrl-C once or twice and SIGTERM from another process: exit 130 / 143, "interrupted at ...", a loadable
+  checkpoint, also when the second Ctrl-C lands inside the checkpoint write (on com-cnn: the same stop of
+  every experiment is the shared runner's, tested once, with each experiment's wiring, in test_runner.py);
 - SIGKILL at five random moments of a run (one inside a slowed checkpoint write), then `--resume`:
   the right final sample count, no duplicate TensorBoard steps, no temp files;
 - a full disk (ENOSPC injected into the checkpoint writer): one line, the previous checkpoint intact;
@@ -373,24 +374,18 @@ def test_enough_bad_inputs_over_every_experiment():
 
 
 # ---------------------------------------------------------------------------- signals
-# (experiment, overrides that make the run long enough to be interrupted, resume check key)
+# Signals from another process to a real `charctl train`, on one experiment: the stop itself is the shared
+# runner's, tested once for every signal sequence, and every experiment's wiring to it, in tests/test_runner.py.
+# (experiment, overrides that make the run long enough to be interrupted)
 LONG_RUNS = {
     "com-cnn": ["scale=smoke", "train.steps=3000", "train.checkpoint_every=1000"],
-    "cgail": ["scale=smoke", "train.total_samples=200000", "train.checkpoint_every=1000"],
-    "srb": ["scale=smoke", "train.total_samples=2000000", "train.checkpoint_every=1000"],
-    "hopper-ga": ["scale=smoke", "ga.generations=2000"],
 }
 SLOW = pytest.mark.slow
 SIGNAL_CASES = [
     ("com-cnn", ("SIGINT", "SIGINT"), 130),
     ("com-cnn", ("SIGTERM",), 143),
-    ("cgail", ("SIGINT", "SIGINT"), 130),
-    ("srb", ("SIGTERM", "SIGINT"), 143),
-    ("hopper-ga", ("SIGINT", "SIGINT"), 130),
     pytest.param("com-cnn", ("SIGINT",), 130, marks=SLOW),
     pytest.param("com-cnn", ("SIGTERM", "SIGINT"), 143, marks=SLOW),
-    pytest.param("cgail", ("SIGTERM",), 143, marks=SLOW),
-    pytest.param("srb", ("SIGINT",), 130, marks=SLOW),
 ]
 
 

@@ -1,8 +1,11 @@
 """The shared training runner (charctl.rl.runner) with a tiny fake learner: what every experiment on it
 (cgail, srb, com-cnn, hopper-ga) gets without testing it again — a stop signal finishes the iteration,
-checkpoints and raises `Interrupted`; --resume continues the counters; a reached budget, a NaN statistic
-or parameter are one-line errors that keep the last finite checkpoint; budgets in samples or in
-iterations; a per-iteration sample count read after each iteration (a GA's generations differ)."""
+checkpoints and raises `Interrupted` (exit 130 / 143: the first of one or two signals decides); --resume
+continues the counters; a reached budget, a NaN statistic or parameter are one-line errors that keep the
+last finite checkpoint (or say that none was written yet); budgets in samples or in iterations; a
+per-iteration sample count read after each iteration (a GA's generations differ). One smoke per experiment
+shows that its `charctl train` runs on the runner: a stop signal in its first iteration ends the command
+the runner's way."""
 
 from __future__ import annotations
 
@@ -21,7 +24,8 @@ from charctl.runs import Run
 class FakeLearner:
     """Iteration i consumes `sizes[i % len(sizes)]` samples and returns loss 1 / (i + 1), or only every
     `log_stride`-th iteration (com-cnn's cadence); `events` maps an iteration number (1-based) to what
-    happens in it: "SIGTERM" (sent to this process), "nan" (the loss), "inf-weight" (a parameter)."""
+    happens in it: signals sent to this process in order ("SIGTERM", "SIGINT+SIGINT", ...), "nan" (the
+    loss), "inf-weight" (a parameter)."""
 
     def __init__(self, sizes=(4,), events=None, log_stride: int = 1) -> None:
         self.iteration = 0
@@ -36,8 +40,9 @@ class FakeLearner:
         self.seen.append((i, self.samples))
         self.samples_per_iteration = self.sizes[i % len(self.sizes)]
         event = self.events.get(i + 1)
-        if event == "SIGTERM":
-            os.kill(os.getpid(), signal.SIGTERM)
+        if event and event.startswith("SIG"):
+            for name in event.split("+"):
+                os.kill(os.getpid(), getattr(signal, name))
         if event == "inf-weight":
             with torch.no_grad():
                 self.net.weight.fill_(float("inf"))
@@ -150,6 +155,82 @@ def test_stop_signal_checkpoints_the_finished_iteration_and_resume_continues(
     assert not (tmp_path / "resumes.txt").exists()
 
 
+# the signals of one stop, in the order they arrive, and the exit code (the first signal's: a second one only
+# says that the stop is under way)
+STOPS = [("SIGINT", 130), ("SIGINT+SIGINT", 130), ("SIGTERM", 143), ("SIGTERM+SIGINT", 143)]
+
+
+@pytest.mark.parametrize("signals, code", STOPS, ids=[s for s, _ in STOPS])
+def test_one_or_two_signals_finish_the_iteration_with_the_first_signals_exit_code(
+    signals, code, tmp_path, signals_restored, capsys
+):
+    learner = FakeLearner(events={2: signals})
+    with pytest.raises(Interrupted) as exc:
+        _train(tmp_path, learner, total_iterations=10, iteration_name="step", checkpoint_every=100)
+    assert exc.value.exit_code == code
+    assert str(exc.value) == f"interrupted at step 2/10: checkpoint written; continue with --resume {tmp_path}"
+    assert len(learner.seen) == 2 and _state(tmp_path)["iteration"] == 2  # the iteration finished, no other began
+    assert [p for p in tmp_path.rglob("*") if ".tmp" in p.name] == []
+    err = capsys.readouterr().err
+    assert "stopping: finishing this iteration" in err and ("still stopping" in err) == ("+" in signals)
+
+
+# every experiment's `charctl train`, long enough not to end before the stop: its overrides, the signals sent
+# in its first iteration and the exit code
+WIRED = {
+    "com-cnn": (["scale=smoke", "train.steps=3000", "train.checkpoint_every=1000"], "SIGTERM", 143),
+    "cgail": (["scale=smoke", "train.total_samples=200000", "train.checkpoint_every=1000"], "SIGINT+SIGINT", 130),
+    "srb": (["scale=smoke", "train.total_samples=2000000", "train.checkpoint_every=1000"], "SIGTERM+SIGINT", 143),
+    "hopper-ga": (["scale=smoke", "ga.generations=2000"], "SIGINT+SIGINT", 130),
+}
+
+
+@pytest.mark.parametrize("experiment", list(WIRED))
+def test_every_experiment_trains_on_the_runner_and_stops_like_it(
+    experiment, tmp_path, signals_restored, charctl_main, monkeypatch
+):
+    """`charctl train EXP` (main() in this process) hands its learner to run_on_policy, so a stop during the
+    first iteration (its progress bar shown) ends it as the tests above show for any learner: the first
+    signal's exit code, no traceback and no "done:", the last stderr line "interrupted ... --resume RUN",
+    a checkpoint that loads as EXP's, no temp file. (tests/test_faults.py sends the signals from another
+    process, to com-cnn.)"""
+    import charctl.rl.runner as runner
+    from charctl.checkpoints import load_checkpoint
+
+    overrides, signals, code = WIRED[experiment]
+    learners = []
+    run_on_policy_itself = runner.run_on_policy
+
+    def run_with_signals_in_the_first_iteration(learner, run, settings):
+        learners.append(learner)
+        iterate = learner.iterate
+
+        def iterate_signalled():
+            if learner.iteration == 0:
+                for name in signals.split("+"):
+                    os.kill(os.getpid(), getattr(signal, name))
+            return iterate()
+
+        learner.iterate = iterate_signalled
+        return run_on_policy_itself(learner, run, settings)
+
+    monkeypatch.setattr(runner, "run_on_policy", run_with_signals_in_the_first_iteration)
+    out = tmp_path / "out"
+    res = charctl_main("train", experiment, *overrides, f"output_root={out}")
+    assert len(learners) == 1, "the experiment did not train through charctl.rl.runner.run_on_policy"
+    assert res.returncode == code, f"exit {res.returncode}:\n{res.stdout}\n{res.stderr}"
+    before_stop = res.stderr.split("stopping:")[0]  # the signals came with the loop (and its progress bar) running
+    assert " samples (" in before_stop or " gen (" in before_stop, res.stderr
+    assert "Traceback" not in res.stdout + res.stderr and "done:" not in res.stdout
+    last = [line for line in res.stderr.splitlines() if line.strip()][-1]
+    assert last.startswith("interrupted") and "--resume" in last, last
+    (run_dir,) = sorted(p for p in (out / experiment).glob("*") if (p / "config.yaml").is_file())
+    assert str(run_dir) in last
+    state = load_checkpoint(run_dir / "checkpoints" / "last.pt", experiment)  # weights_only, experiment checked
+    assert state is not None and learners[0].iteration == 1
+    assert [p for p in run_dir.rglob("*") if ".tmp" in p.name] == []
+
+
 @pytest.mark.parametrize("event, what", [("nan", "train/loss = nan"), ("inf-weight", "parameter Linear.weight")])
 def test_non_finite_stat_or_parameter_stops_with_one_line_and_keeps_the_last_checkpoint(event, what, tmp_path):
     learner = FakeLearner(events={5: event})
@@ -162,6 +243,17 @@ def test_non_finite_stat_or_parameter_stops_with_one_line_and_keeps_the_last_che
     assert state["iteration"] == 4 and bool(torch.isfinite(state["net"]["weight"]).all())
     metrics = _metrics(tmp_path)
     assert metrics == {"diverged": True, "error": message, "iterations": 5, "samples": 20}
+
+
+def test_divergence_before_the_first_checkpoint_says_that_none_was_written(tmp_path):
+    """cgail / srb with ppo.lr=10 diverge in their first iteration (tests/test_faults.py): the line then says
+    that no checkpoint was kept, and none is left behind."""
+    with pytest.raises(Diverged) as exc:
+        _train(tmp_path, FakeLearner(events={1: "nan"}), total_iterations=10, iteration_name="step")
+    message = str(exc.value)
+    assert message.startswith("training diverged at step 1 (train/loss = nan); no checkpoint had been written yet")
+    assert not (tmp_path / "checkpoints" / "last.pt").exists()
+    assert _metrics(tmp_path) == {"diverged": True, "error": message, "iterations": 1, "samples": 4}
 
 
 def test_samples_per_iteration_is_read_after_each_iteration_and_kept_checkpoints_follow_it(tmp_path, capsys):
