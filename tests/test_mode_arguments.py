@@ -7,8 +7,10 @@ disk: the output folder the command was pointed at stays absent, and nothing app
 used to fail only after a first file was written: an unknown sweep case (config.yaml in -o), a second
 hopper-ga run without a checkpoint (the first run's figures), the web demo of a tracking run (the ONNX
 file), --fps on a BVH-folder skeleton (a new run directory), a missing --checkpoint with --curves, a sweep's
-missing data.bvh_dir, unknown clip or too low data.fps (config.yaml in -o, or a new run directory), and a
-sweep case whose database has too few searchable frames (config.yaml in -o, after the cases before it ran).
+missing data.bvh_dir, unknown clip or too low data.fps (config.yaml in -o, or a new run directory), a
+sweep case whose database has too few searchable frames, and a runtime.exclude_window that leaves a search
+nothing to choose from (config.yaml in -o or a new run directory, after the cases before it ran; export: a
+traceback).
 
 On a machine that cannot render, the modes that render (`NO_RENDER`) give their one-line error before
 anything is written: it used to come after com-cnn's CSV, plot and BVH, hopper-ga's BVH and
@@ -70,6 +72,19 @@ MODES = [
         "data.mirror=false runtime.end_buffer=140 -o {out}",
         ["1 searchable frames"],
     ),
+    (  # the one clip (kick, not mirrored) is inside the exclusion window of every frame: the first search failed
+        "eval-mm-sweep-exclude",
+        "eval motion-matching --sweep scale=smoke output_root={tmp}/runs data.clips=[kick] data.mirror=false "
+        "runtime.exclude_window=1000",
+        ["runtime.exclude_window", "clip 'kick'"],
+    ),
+    (  # a 10-frame window leaves case 1 (kick frames 0..40 searchable) frames to jump to from every frame, not
+        # case 10 (frames 10..21) from its frames 12..19: the sweep used to run case 1 first
+        "eval-mm-sweep-exclude-case",
+        "eval motion-matching --sweep scale=smoke output_root={tmp}/runs sweep.cases=[1,10] data.clips=[kick] "
+        "data.mirror=false runtime.exclude_window=40 -o {out}",
+        ["runtime.exclude_window", "frame 12 of clip 'kick': all 12"],
+    ),
     (
         "eval-mm-sweep-fps",
         "eval motion-matching --sweep scale=smoke output_root={tmp}/runs data.fps=1 -o {out}",
@@ -99,6 +114,12 @@ MODES = [
         "export-mm-video",
         "export motion-matching scale=smoke output_root={tmp}/runs path=nosuch --video {out}/x.mp4",
         ["nosuch"],
+    ),
+    (  # the rollout's first search used to fail
+        "export-mm-bvh-exclude",
+        "export motion-matching scale=smoke output_root={tmp}/runs data.clips=[kick] data.mirror=false "
+        "runtime.exclude_window=1000 --bvh {out}/x.bvh",
+        ["runtime.exclude_window", "clip 'kick'"],
     ),
     ("export-hopper-bvh", "export {hopper} --bvh {out}/h.bvh --seconds 0", ["--seconds"]),
     ("export-hopper-video", "export {hopper} --video {out}/h.mp4 --fps -5", ["--fps"]),

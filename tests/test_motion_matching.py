@@ -308,6 +308,75 @@ def test_searchable_frames_are_counted_without_building_the_database():
     assert str(counted.value) == str(built.value) and "1 searchable frames" in str(built.value)
 
 
+def _straight_info():
+    from charctl.experiments.motion_matching.sources import SkeletonInfo
+    from charctl.motion.skeleton import BODY_NAMES
+
+    ends = [BODY_NAMES.index("right_ankle"), BODY_NAMES.index("left_ankle")]
+    return SkeletonInfo("humanoid", list(BODY_NAMES), np.array([1.0, 0.0, 0.0]), ends)
+
+
+@pytest.mark.parametrize("kind", ["brute", "kdtree", "bbox"])
+def test_exclusion_window_holding_every_searchable_frame_is_found_before_the_search(kind):
+    """By hand: the 120-frame straight clip at 30 Hz has future offsets 6, 12, 19, 25 (25 paper frames each)
+    and end_buffer 20 -> 5 frames, so frames 0..94 (95) are searchable. From the current frame p, all of them
+    are inside a window of k frames iff 94 - k < p < k: none for k = 47, frame 47 for k = 48, frames 45..49
+    for k = 50 (runtime.exclude_window = 4k paper frames). check_exclusion gives the error that search gives
+    from such a frame, and search from the frame next to it finds frame 94, the one frame k away."""
+    from charctl.experiments.motion_matching.database import (
+        blocked_frames,
+        build_database,
+        check_exclusion,
+        check_searchable,
+    )
+    from charctl.experiments.motion_matching.search import make_index, search
+
+    sources = [_straight_source(0.0)]
+    for window, blocked in ((188, []), (192, [47]), (200, [45, 46, 47, 48, 49])):
+        cfg = smoke_cfg(f"runtime.exclude_window={window}")
+        assert check_searchable(cfg, sources) == 95
+        assert blocked_frames(cfg, sources)[0].tolist() == blocked
+    check_exclusion(smoke_cfg("runtime.exclude_window=188"), sources)
+    cfg = smoke_cfg("runtime.exclude_window=192")
+    with pytest.raises(CharctlError) as checked:
+        check_exclusion(cfg, sources)
+    assert "frame 47 of clip 'straight': all 95 are in that clip, closer than 48 frames" in str(checked.value)
+    db = build_database(cfg, sources, _straight_info())
+    index = make_index(kind, db)
+    with pytest.raises(CharctlError) as searched:
+        search(db, index, db.features[47], 47)
+    assert str(searched.value) == str(checked.value)
+    assert search(db, index, db.features[46], 46)[0] == 94
+
+
+@pytest.mark.parametrize(
+    "overrides",
+    [
+        ["data.clips=[kick]"],  # not a loop
+        ["data.clips=[walk]", "data.loop_cycles_before=0", "features.past_samples=2"],  # part of a loop's cycle
+        ["data.clips=[run]", "data.fps=25", "data.loop_cycles_before=0", "features.past_samples=1"],  # period 20.0000..
+    ],
+)
+def test_blocked_frames_are_the_frames_the_search_finds_nothing_from(overrides):
+    """blocked_frames (the farthest searchable frame decides) == every frame from the first searchable one to
+    the clip's end whose window (Database.excluded, the search's rule) holds every searchable frame."""
+    from charctl.experiments.motion_matching.database import blocked_frames, build_database, paper_frames
+    from charctl.experiments.motion_matching.sources import load_sources
+
+    cfg = smoke_cfg("data.mirror=false", *overrides)
+    sources, info = load_sources(cfg)
+    db = build_database(cfg, sources, info)
+    rows = db.search_rows
+    seen = set()
+    for window in range(0, 200, 2):
+        db.exclude_window = paper_frames(window, cfg)
+        want = [f for f in range(rows[0], db.num_frames) if db.exclude_window > 0 and db.excluded(rows, f).all()]
+        got = blocked_frames(smoke_cfg("data.mirror=false", *overrides, f"runtime.exclude_window={window}"), sources)
+        assert got[0].tolist() == want, window
+        seen.add(len(want))
+    assert 0 in seen and len(seen) > 3  # the windows run from none blocked through some to all
+
+
 # ---------------------------------------------------------------------------- Table 1 and end to end
 def test_table1_cases():
     from charctl.experiments.motion_matching.cases import TABLE1, describe, with_case

@@ -101,14 +101,23 @@ class Database:
         return self.features[self.search_rows]
 
     def excluded(self, frames: np.ndarray, cur: int) -> np.ndarray:
-        """True for `frames` within the exclusion window around `cur` (same clip, phase distance < k)."""
+        """True for `frames` within the exclusion window around `cur` (`in_window`)."""
         frames = np.asarray(frames)
-        c = self.clip_id[cur]
-        d = np.abs(self.phase[frames] - self.phase[cur])
-        period = self.clip_period[c]
-        if period > 0:
-            d = np.minimum(d, period - d)
-        return (self.clip_id[frames] == c) & (d < self.exclude_window)
+        c = self.clip_id[frames]
+        return in_window(
+            c, self.phase[frames], self.clip_period[c], self.clip_id[cur], self.phase[cur], self.exclude_window
+        )
+
+
+def in_window(clip, phase, period, cur_clip, cur_phase, window) -> np.ndarray:
+    """The exclusion rule (paper §3): True for the frames of clip `clip` at `phase` (frames; circular within
+    `period` for an unrolled loop, 0 = not a loop) that a search made from the current frame (`cur_clip`,
+    `cur_phase`) skips: same clip and phase distance < `window` (database frames; 0 skips nothing). Arguments
+    broadcast. Database.excluded, search.RowInfo.excluded and the pre-checks use it; the bbox kernel
+    (_bbox_numba.py) is its compiled copy."""
+    d = np.abs(np.asarray(phase, dtype=float) - cur_phase)
+    d = np.where(np.asarray(period) > 0, np.minimum(d, period - d), d)
+    return (np.asarray(clip) == cur_clip) & (d < window)
 
 
 def paper_frames(n: float, cfg) -> int:
@@ -166,7 +175,7 @@ def build_database(cfg, sources: list[SourceMotion] | None = None, info: Skeleto
         valid=cat["valid"],
         search_rows=search_rows,
         layout=layout,
-        exclude_window=paper_frames(cfg.runtime.exclude_window, cfg),
+        exclude_window=_window(cfg),
     )
 
 
@@ -174,14 +183,84 @@ def check_searchable(cfg, sources: list[SourceMotion]) -> int:
     """The number of searchable frames build_database(cfg, sources) would have, counted without computing
     any feature (so a sweep can check every case before it writes); fewer than 2 is build_database's
     one-line error."""
-    fut, past = feature_offsets(cfg)
-    count = 0
-    for s in sources:
-        t = np.arange(s.root_pos.shape[0])
-        searchable, _ = _searchable_and_phase(s, cfg, t)
-        count += int(np.count_nonzero(searchable & _full_horizon(t, fut, past)))
+    count = sum(int(np.count_nonzero(rows)) for rows, _ in _search_frames(cfg, sources))
     _require_searchable(count)
     return count
+
+
+def check_exclusion(cfg, sources: list[SourceMotion]) -> None:
+    """A one-line error (the one `search` gives when it finds nothing) if `runtime.exclude_window` can
+    exclude every searchable frame of build_database(cfg, sources) from a search, found without computing
+    any feature (so eval and export check it before they write); see `blocked_frames`."""
+    per_clip = _search_frames(cfg, sources)
+    count = sum(int(np.count_nonzero(rows)) for rows, _ in per_clip)
+    for s, frames in zip(sources, _blocked(per_clip, [s.period for s in sources], _window(cfg))):
+        if frames.size:
+            raise exclusion_error(s.name, int(frames[0]), count, _window(cfg))
+
+
+def blocked_frames(cfg, sources: list[SourceMotion]) -> list[np.ndarray]:
+    """Per source, the frames (indices into the clip) a search can be made from with every searchable frame
+    of build_database(cfg, sources) inside their exclusion window (`in_window`): a search from one of them
+    finds nothing.
+
+    Conservative where only the rollout knows: which frames are current when a search is made depends on
+    the search results (the start frame is the best match to the path, playback runs on from each jump for
+    runtime.search_interval frames or, with runtime.continue_if_best, further), so every frame that can be
+    current is counted: from the clip's first searchable frame (a start or jump target) to its last.
+    Exact otherwise: another clip's frames are never excluded, so only a database whose searchable frames
+    all lie in one clip can have blocked frames; from a current phase p the searchable frame farthest away
+    decides (it is inside the window only if all are): the first or last searchable phase of a clip that is
+    not a loop, a neighbour of the antipode p + period/2 of a loop."""
+    return _blocked(_search_frames(cfg, sources), [s.period for s in sources], _window(cfg))
+
+
+def _blocked(per_clip: list[tuple[np.ndarray, np.ndarray]], periods: list[float], window: int) -> list[np.ndarray]:
+    """`blocked_frames` from `_search_frames`' masks and phases, the clips' periods and the window."""
+    out = [np.zeros(0, dtype=int) for _ in per_clip]
+    holding = [i for i, (rows, _) in enumerate(per_clip) if rows.any()]
+    if window <= 0 or len(holding) != 1:
+        return out
+    i = holding[0]
+    rows, phase = per_clip[i]
+    period = float(periods[i])
+    x = np.sort(phase[rows])
+    cur = np.arange(int(np.argmax(rows)), rows.size)
+    p = phase[cur]
+    if period > 0:
+        j = np.searchsorted(x, np.mod(p + period / 2, period))
+        far = np.stack([x[j % x.size], x[(j - 1) % x.size]])
+    else:
+        far = np.stack([np.full(p.shape, x[0]), np.full(p.shape, x[-1])])
+    out[i] = cur[in_window(0, far, period, 0, p, window).all(axis=0)]
+    return out
+
+
+def exclusion_error(clip: str, frame: int, searchable: int, window: int) -> CharctlError:
+    """The one-line error of a search (from frame `frame` of clip `clip`) that finds every one of the
+    database's `searchable` frames inside its exclusion window of `window` database frames."""
+    return CharctlError(
+        f"runtime.exclude_window excludes every searchable frame from a search at frame {frame} of clip "
+        f"{clip!r}: all {searchable} are in that clip, closer than {window} frames (at data.fps) in phase; "
+        "lower runtime.exclude_window or add clips"
+    )
+
+
+def _window(cfg) -> int:
+    """runtime.exclude_window in database frames."""
+    return paper_frames(cfg.runtime.exclude_window, cfg)
+
+
+def _search_frames(cfg, sources: list[SourceMotion]) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Per source, which of its frames build_database(cfg, sources) makes searchable (T,) and their phases
+    (T,), without computing any feature."""
+    fut, past = feature_offsets(cfg)
+    out = []
+    for s in sources:
+        t = np.arange(s.root_pos.shape[0])
+        searchable, phase = _searchable_and_phase(s, cfg, t)
+        out.append((searchable & _full_horizon(t, fut, past), phase))
+    return out
 
 
 def _require_searchable(count: int) -> None:

@@ -29,8 +29,8 @@ def evaluate(targets: list[str], options: dict, overrides: list[str]) -> None:
     if not options.get("sweep"):
         raise CharctlError("motion-matching evaluates with --sweep (the Table 1 feature study)")
     cfg = load_config(targets, overrides)
-    # every case, path and source (data.bvh_dir or data.clips), and each case's database size, checked
-    # before the output folder is made
+    # every case, path and source (data.bvh_dir or data.clips), and each case's database size and exclusion
+    # window, checked before the output folder is made
     cases, paths = sweep_plan(cfg)
     sources = load_sources(cfg)
     check_databases(cfg, cases, sources[0])
@@ -78,12 +78,15 @@ def sweep_plan(cfg) -> tuple[list[int], dict]:
 
 
 def check_databases(cfg, cases: list[int], sources: list[SourceMotion]) -> None:
-    """Each case's database (built from `sources`) would have at least 2 searchable frames; the first case
-    that would not is build_database's one-line error, given here before anything is built or written."""
-    from charctl.experiments.motion_matching.database import check_searchable
+    """Each case's database (built from `sources`) would have at least 2 searchable frames and leave a frame
+    outside runtime.exclude_window for every search; the first case that would not is build_database's or
+    search's one-line error, given here before anything is built or written."""
+    from charctl.experiments.motion_matching.database import check_exclusion, check_searchable
 
     for case in cases:
-        check_searchable(with_case(cfg, case), sources)
+        ccfg = with_case(cfg, case)
+        check_searchable(ccfg, sources)
+        check_exclusion(ccfg, sources)
 
 
 def run_sweep(

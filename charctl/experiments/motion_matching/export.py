@@ -19,10 +19,11 @@ FPS_USER_SKELETON = "--fps is not supported for a data.bvh_dir skeleton; the BVH
 def export(target: str, options: dict, overrides: list[str]) -> None:
     """Run the config's path (`path=`, `case=`) and write metrics.json, root_path.csv, path.png and
     `--bvh` / `--video` of the generated motion."""
-    from charctl.experiments.motion_matching.database import build_database
+    from charctl.experiments.motion_matching.database import build_database, check_exclusion
     from charctl.experiments.motion_matching.paths import make_path, path_errors
     from charctl.experiments.motion_matching.runtime import run_path
     from charctl.experiments.motion_matching.search import make_index
+    from charctl.experiments.motion_matching.sources import load_sources
     from charctl.runs import new_run
 
     cfg = load_config([target], overrides)
@@ -30,7 +31,9 @@ def export(target: str, options: dict, overrides: list[str]) -> None:
     path = make_path(str(cfg.path), cfg.paths)
     seconds = options.get("seconds")
     _check_options(cfg, options, seconds)
-    db = build_database(cfg)
+    sources, info = load_sources(cfg)
+    check_exclusion(cfg, sources)  # before the rollout (which could stop on it after running for a while)
+    db = build_database(cfg, sources, info)
     index = make_index(cfg.runtime.index, db)
     tic = time.perf_counter()
     rollout = run_path(db, index, path, cfg, with_pose=True, seconds=seconds)

@@ -11,6 +11,9 @@ current frame (same clip, phase distance < k; circular for unrolled loops):
           and 64 consecutive rows (consecutive frames are close, so the boxes are tight); the
           large box with the lowest bound is searched first, then every box (large, then small)
           whose lower bound is below the best cost so far
+
+An index answers (-1, inf) when the window holds every row; `search` makes that the one-line
+database.exclusion_error.
 """
 
 from __future__ import annotations
@@ -21,7 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from charctl.experiments.motion_matching.boxes import LARGE_BOX, SMALL_BOX, box_bounds
-from charctl.experiments.motion_matching.database import Database
+from charctl.experiments.motion_matching.database import Database, exclusion_error, in_window
 
 
 @dataclass
@@ -34,11 +37,8 @@ class RowInfo:
     window: float
 
     def excluded(self, rows: np.ndarray, clip: int, phase: float) -> np.ndarray:
-        """True for rows of clip `clip` whose (circular) phase distance to `phase` is < window."""
-        d = np.abs(self.phase[rows] - phase)
-        per = self.period[rows]
-        d = np.where(per > 0, np.minimum(d, per - d), d)
-        return (self.clip[rows] == clip) & (d < self.window)
+        """True for rows of clip `clip` whose (circular) phase distance to `phase` is < window (`in_window`)."""
+        return in_window(self.clip[rows], self.phase[rows], self.period[rows], clip, phase, self.window)
 
 
 def row_info(db: Database) -> RowInfo:
@@ -57,10 +57,14 @@ class BruteIndex:
         self.rows = np.arange(feats.shape[0])
 
     def query(self, q: np.ndarray, clip: int = -1, phase: float = 0.0) -> tuple[int, float]:
-        """(row, squared distance) of the nearest row outside the window of (clip, phase); clip -1: none."""
+        """(row, squared distance) of the nearest row outside the window of (clip, phase); clip -1: none.
+        (-1, inf) when every row is inside it (as every index)."""
         d2 = self.sq - 2.0 * (self.feats @ q) + q @ q
         if clip >= 0:
-            d2 = np.where(self.info.excluded(self.rows, clip, phase), np.inf, d2)
+            excluded = self.info.excluded(self.rows, clip, phase)
+            if excluded.all():
+                return -1, np.inf
+            d2 = np.where(excluded, np.inf, d2)
         i = int(np.argmin(d2))
         return i, float(max(d2[i], 0.0))
 
@@ -86,7 +90,7 @@ class KDTreeIndex:
                 j = int(np.argmax(ok))
                 return int(i[j]), float(d[j] ** 2)
             if k >= self.n:
-                raise RuntimeError("every searchable frame is excluded")
+                return -1, np.inf  # every row is inside the window
             k = min(4 * k, self.n)
 
 
@@ -119,7 +123,7 @@ class BBoxIndex:
             self.info.window,
         )
         if i < 0:
-            raise RuntimeError("every searchable frame is excluded")
+            return -1, np.inf  # every row is inside the window
         return int(i), float(d)
 
 
@@ -150,10 +154,15 @@ def make_index(kind: str, db_or_feats, info: RowInfo | None = None):
 def search(db: Database, index, query: np.ndarray, cur: int | None) -> tuple[int, float]:
     """The database frame nearest to `query`, skipping the window around frame `cur`.
 
-    Returns (frame index into the database, squared distance).
+    Returns (frame index into the database, squared distance). A window that holds every searchable frame
+    is database.exclusion_error (eval and export refuse such a config before they start:
+    database.check_exclusion).
     """
     if cur is None or db.exclude_window <= 0:
         row, d2 = index.query(query)
     else:
-        row, d2 = index.query(query, int(db.clip_id[cur]), float(db.phase[cur]))
+        c = int(db.clip_id[cur])
+        row, d2 = index.query(query, c, float(db.phase[cur]))
+        if row < 0:
+            raise exclusion_error(db.clip_names[c], int(cur - db.clip_start[c]), db.num_searchable, db.exclude_window)
     return int(db.search_rows[row]), d2
