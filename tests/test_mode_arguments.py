@@ -1,4 +1,4 @@
-"""Every `charctl eval` and `charctl export` mode checks all its arguments before it writes anything.
+"""Every `charctl eval` and `charctl export` mode, and `charctl train`, checks its arguments before it writes.
 
 One case per mode (each experiment's eval modes, its export outputs, and the clip exports): a bad
 argument of that mode gives exit 2, exactly one `error:` line naming it, no traceback, and nothing on
@@ -11,6 +11,12 @@ missing data.bvh_dir, unknown clip or too low data.fps (config.yaml in -o, or a 
 sweep case whose database has too few searchable frames, and a runtime.exclude_window that leaves a search
 nothing to choose from (config.yaml in -o or a new run directory, after the cases before it ran; export: a
 traceback).
+
+`charctl train` likewise (`TRAIN`): a config whose data cannot be trained (the experiment's `preflight`: an unknown
+clip, a motion-matching database with too few searchable frames, a reference clip srb cannot follow) is a one-line
+error before the run directory is made, before the first one of a `-m` sweep whose later job is the bad one, and
+before a `--resume` writes to the run; it used to come after (a run directory with config.yaml, or a rewritten
+config.yaml and resumes.txt).
 
 On a machine that cannot render, the modes that render (`NO_RENDER`) give their one-line error before
 anything is written: it used to come after com-cnn's CSV, plot and BVH, hopper-ga's BVH and
@@ -125,6 +131,41 @@ MODES = [
     ("export-hopper-video", "export {hopper} --video {out}/h.mp4 --fps -5", ["--fps"]),
 ]
 
+# `charctl train` (id, arguments, words): a config its data cannot train (the experiment's `preflight`) is refused
+# before the run directory is made (all of a sweep's jobs before the first), or a resumed run is written to
+TRAIN = [
+    (  # kick (not a loop) has no frame left once the last 1000 (120 Hz) frames are never searched
+        "train-mm-searchable",
+        "train motion-matching scale=smoke output_root={tmp}/runs data.clips=[kick] data.mirror=false "
+        "runtime.end_buffer=1000",
+        ["0 searchable frames"],
+    ),
+    (  # the first job (end_buffer 20) is fine: its run directory used to be made, and trained, first
+        "train-mm-multirun",
+        "train motion-matching scale=smoke output_root={tmp}/runs data.clips=[kick] data.mirror=false "
+        "runtime.end_buffer=20,1000 -m",
+        ["0 searchable frames"],
+    ),
+    ("train-mm-case", "train motion-matching scale=smoke output_root={tmp}/runs case=best", ["case=best", "sweep"]),
+    (
+        "train-cgail-clip",
+        "train cgail scale=smoke output_root={tmp}/runs skills=[{{name:walk,clip:nosuch_clip}}] use_skills=[walk]",
+        ["nosuch_clip"],
+    ),
+    ("train-srb-clip", "train srb scale=smoke output_root={tmp}/runs reference.clip=kick", ["kick", "walking clip"]),
+    (  # the checkpoint used to load first: config.yaml rewritten with the clip and resumes.txt made, then the error
+        "train-srb-resume",
+        "train srb --resume {srb} reference.clip=kick train.total_samples=4096",
+        ["kick", "walking clip"],
+    ),
+    (
+        "train-com-cnn-clip",
+        "train com-cnn scale=smoke output_root={tmp}/runs data.clips=[nosuch_clip] data.test_clips=[]",
+        ["nosuch_clip"],
+    ),
+    ("train-com-cnn-bvh", "train com-cnn scale=smoke output_root={tmp}/runs data.bvh_dir={mocap}", ["com.bvh_joints"]),
+]
+
 # (id, arguments) of the modes that render, run on a machine that cannot: the one-line error before any file
 NO_RENDER = [
     ("eval-cgail-fidelity", "eval {cgail} --fidelity -k 1 -o {out}"),
@@ -190,6 +231,11 @@ def test_a_bad_argument_writes_nothing(case, runs, tmp_path, charctl_main, monke
 
         monkeypatch.setattr(web_site, "check_web_sources", lambda *a, **k: None)
     assert_writes_nothing(charctl_main, template, words, runs, tmp_path)
+
+
+@pytest.mark.parametrize("case", TRAIN, ids=[c[0] for c in TRAIN])
+def test_a_config_its_data_cannot_train_writes_nothing(case, runs, tmp_path, charctl_main):
+    assert_writes_nothing(charctl_main, case[1], case[2], runs, tmp_path)
 
 
 @pytest.mark.parametrize("case", NO_RENDER, ids=[c[0] for c in NO_RENDER])

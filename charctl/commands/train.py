@@ -26,7 +26,8 @@ def train_command(
     cpus_per_job: float = 1.0,
     gpus_per_job: float = 0.0,
 ) -> list[Path]:
-    """Compose/validate the config, create (or reopen) the run directory, hand over to the experiment.
+    """Compose/validate the config, run the experiment's `preflight` on it (every job of a sweep before the
+    first run directory), create (or reopen) the run directory, hand over to the experiment.
 
     `launcher="ray"` runs the job(s) - every combination of a `-m` sweep - side by side on Ray
     (charctl.launch.ray_jobs) instead of one after another in this process."""
@@ -37,8 +38,10 @@ def train_command(
     check_experiment(experiment)
     _check_launcher(launcher, address, resume, (cpus_per_job, gpus_per_job) != (1.0, 0.0))
     if launcher == "ray":
+        # every job is `charctl train` in a child process: its preflight runs there, before its run directory
         return _train_on_ray(experiment, overrides, multirun, address, cpus_per_job, gpus_per_job)
-    train_fn = load(experiment).entry("train")
+    exp = load(experiment)
+    train_fn = exp.entry("train")
     schema = _schema(experiment)
     if resume is not None:
         if multirun:
@@ -49,12 +52,15 @@ def train_command(
         run = open_run(resume, schema, overrides)
         if not run.has_checkpoint():
             raise CharctlError(f"{resume} has no checkpoint to resume from (checkpoints/last.pt)")
+        exp.preflight_check(run.cfg)  # before anything is written to the run
         run.resume_overrides = list(overrides)  # into config.yaml once the checkpoint loads (Run.load_checkpoint)
         print(f"resuming {run.dir}")
         _run(train_fn, run)
         return [run.dir]
     jobs = expand_multirun(overrides) if multirun else [overrides]
     cfgs = [compose_config(experiment, job, schema) for job in jobs]  # validate every job before starting any
+    for cfg in cfgs:  # and check it against its data (the schema cannot see that)
+        exp.preflight_check(cfg)
     dirs = []
     for i, (job, cfg) in enumerate(zip(jobs, cfgs)):
         if multirun:

@@ -12,6 +12,13 @@ references, imported only when called:
     play      play(run_dir)                              `charctl play NAME|RUN` (optional)
     checkpoints  checkpoints(targets, options, overrides) -> CheckpointEvaluation
                                                          `charctl eval NAME|RUN --checkpoints` (optional)
+    preflight  preflight(cfg) -> None                    `charctl train NAME`, `--resume RUN` (optional)
+
+`preflight` raises a one-line CharctlError for a problem the schema cannot see because it lies in the data
+the config names (an unknown clip, a database with too few searchable frames). `charctl train` calls it on
+every composed job (all of a `-m` sweep's) before the first run directory is made, and on a `--resume` run's
+config before anything is written there. It reads, never writes, and is cheap (what it loads, `train` loads
+again); a problem only the training itself finds stays `train`'s.
 
 `eval_options` / `export_options` declare the command-line options the experiment adds to
 `charctl eval` / `charctl export`; the CLI builds each experiment's option set from them.
@@ -48,7 +55,7 @@ EXPERIMENTS: dict[str, str] = {
     "hopper-ga": "charctl.experiments.hopper_ga",
 }
 
-ROLES = ("schema", "train", "evaluate", "export", "play", "checkpoints")
+ROLES = ("schema", "train", "evaluate", "export", "play", "checkpoints", "preflight")
 
 
 @dataclass(frozen=True)
@@ -86,6 +93,7 @@ class Experiment:
     export: str = ""
     play: str = ""
     checkpoints: str = ""  # "module:factory" of `charctl eval RUN --checkpoints` (a CheckpointEvaluation)
+    preflight: str = ""  # "module:function" checking a train config against its data before anything is written
     eval_options: tuple[Option, ...] = ()
     export_options: tuple[Option, ...] = ()
     provides: Mapping[str, str] = field(default_factory=dict)  # capability -> module implementing it
@@ -98,6 +106,11 @@ class Experiment:
         if not ref:
             raise CharctlError(f"experiment {self.name!r} does not support `{role}`")
         return _resolve(ref)
+
+    def preflight_check(self, cfg) -> None:
+        """The experiment's `preflight` on `cfg` (a one-line CharctlError); nothing when it declares none."""
+        if self.preflight:
+            self.entry("preflight")(cfg)
 
     def config_class(self) -> type:
         """The structured config dataclass."""

@@ -34,6 +34,7 @@ EXPERIMENT = Experiment(
     summary="conditional adversarial imitation: one humanoid policy, skills switched by command",
     schema=f"{_PKG}.config:Config",
     train=f"{_PKG}.train:train",
+    preflight=f"{_PKG}.skills:preflight",
     evaluate=f"{_PKG}.evaluate:evaluate",
     export=f"{_PKG}.export:export",
     play=f"{_PKG}.export:play",

@@ -53,6 +53,13 @@ def load_skills(skills, control_hz: float) -> list[SkillData]:
     return out
 
 
+def preflight(cfg) -> None:
+    """`charctl train`'s check before the run directory is made: the clip of every selected skill loads
+    (`load_skills` loads and resamples them again)."""
+    for s in select_skills(cfg):
+        load_clip(s.clip)
+
+
 def select_skills(cfg):
     """The configured skills, restricted to `use_skills` when given (order kept)."""
     if not cfg.use_skills:

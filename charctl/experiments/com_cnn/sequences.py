@@ -149,12 +149,7 @@ def load_bvh_dir(cfg) -> tuple[list[Sequence], BodyModel]:
     from charctl.motion.bvh import read_bvh
     from charctl.motion.clip import Clip
 
-    root = Path(cfg.data.bvh_dir).expanduser()
-    if not root.is_dir():
-        raise CharctlError(f"data.bvh_dir: {root} is not a folder")
-    files = sorted(root.rglob("*.bvh"))
-    if not files:
-        raise CharctlError(f"data.bvh_dir: no .bvh files in {root}")
+    root, files = bvh_files(cfg)
     body, seqs = None, []
     for path in files:
         motion = read_bvh(path)
@@ -166,7 +161,7 @@ def load_bvh_dir(cfg) -> tuple[list[Sequence], BodyModel]:
             )
         trans, rot = motion.local_transforms()
         rel = path.relative_to(root)
-        name = str(rel.with_suffix(""))
+        name = bvh_clip_name(rel)
         clip = Clip(
             name=name, fps=motion.fps, root_pos=trans[:, 0] * cfg.data.bvh_scale, local_rot=rot, skeleton=body.skeleton
         )
@@ -188,6 +183,22 @@ def load_bvh_dir(cfg) -> tuple[list[Sequence], BodyModel]:
             )
         )
     return seqs, body
+
+
+def bvh_files(cfg) -> tuple[Path, list[Path]]:
+    """`data.bvh_dir` and every .bvh under it (sorted); one-line errors for a folder that is none or holds none."""
+    root = Path(cfg.data.bvh_dir).expanduser()
+    if not root.is_dir():
+        raise CharctlError(f"data.bvh_dir: {root} is not a folder")
+    files = sorted(root.rglob("*.bvh"))
+    if not files:
+        raise CharctlError(f"data.bvh_dir: no .bvh files in {root}")
+    return root, files
+
+
+def bvh_clip_name(rel: Path) -> str:
+    """The clip (and split unit) name of a BVH file at `rel` under data.bvh_dir: its path without the suffix."""
+    return str(rel.with_suffix(""))
 
 
 def bvh_body(motion, path: Path, cfg) -> BodyModel:
@@ -236,19 +247,41 @@ def load_sequences(cfg) -> tuple[list[Sequence], BodyModel]:
 
 def split_sequences(seqs: list[Sequence], test_clips) -> tuple[list[Sequence], list[Sequence]]:
     """Train/test split by clip: a clip and its mirror share `base`, so they always land together."""
+    check_split([s.base for s in seqs], test_clips)
     test_set = set(test_clips)
-    known = {s.base for s in seqs}
+    return [s for s in seqs if s.base not in test_set], [s for s in seqs if s.base in test_set]
+
+
+def check_split(bases, test_clips) -> None:
+    """One-line errors for `data.test_clips` naming a clip that is not among `bases` (the split units), or all."""
+    test_set = set(test_clips)
+    known = set(bases)
     missing = sorted(test_set - known)
     if missing:
         raise CharctlError(
             f"data.test_clips {missing} are not among the clips "
             f"({', '.join(sorted(known)[:8])}, ...); set data.test_clips=[...]"
         )
-    train = [s for s in seqs if s.base not in test_set]
-    test = [s for s in seqs if s.base in test_set]
-    if not train:
+    if not known - test_set:
         raise CharctlError("data.test_clips holds every clip: nothing left to train on")
-    return train, test
+
+
+def preflight(cfg) -> None:
+    """`charctl train`'s checks before the run directory is made, without building a sequence (`train` loads
+    the clips again): every DeepMimic clip loads; a BVH folder holds .bvh files, the first one's skeleton
+    matches the mass table (com.bvh_joints) and data.test_clips names its clips. What only reading every BVH
+    file finds (a second skeleton, a file of fewer than 2 frames) stays `train`'s."""
+    from charctl.motion.library import load_clip
+
+    if not cfg.data.bvh_dir:
+        for name in cfg.data.clips:
+            load_clip(name)
+        return
+    from charctl.motion.bvh import read_bvh
+
+    root, files = bvh_files(cfg)
+    bvh_body(read_bvh(files[0]), files[0], cfg)
+    check_split([bvh_clip_name(f.relative_to(root)) for f in files], cfg.data.test_clips)
 
 
 def motion_type(label: str, motion_types: dict) -> str:

@@ -2,7 +2,7 @@
 and the paper's Table 1 feature study. Declaration only; the work is in the modules:
 
   config.py           schema (+ the config of a run or of the experiment)
-  train.py            builds the feature database into a run (no learning)
+  train.py            builds the feature database into a run (no learning); its checks before the run (preflight)
   evaluate.py         `eval --sweep`: the Table 1 sweep, its tables and plots, report.md
   export.py           one rollout along a path -> BVH / mp4
   cases.py            the Table 1 feature settings
@@ -25,6 +25,7 @@ EXPERIMENT = Experiment(
     summary="feature-vector motion matching along target paths; the Table 1 feature study",
     schema=f"{_PKG}.config:Config",
     train=f"{_PKG}.train:train",
+    preflight=f"{_PKG}.train:preflight",
     evaluate=f"{_PKG}.evaluate:evaluate",
     export=f"{_PKG}.export:export",
     eval_options=(Option("sweep", "the Table 1 feature sweep (19 cases x circle, square, star)", mode=True), OUT),

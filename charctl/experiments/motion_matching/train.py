@@ -9,6 +9,18 @@ import numpy as np
 from charctl.experiments.motion_matching.cases import resolve_case
 
 
+def preflight(cfg) -> None:
+    """`charctl train`'s check before the run directory is made: `train`'s one-line errors about the case, the
+    clips and a database with too few searchable frames (database.check_searchable, no feature computed).
+    Training never searches, so runtime.exclude_window is not checked here (eval and export check it)."""
+    from charctl.experiments.motion_matching.database import check_searchable
+    from charctl.experiments.motion_matching.sources import load_sources
+
+    cfg, _ = resolve_case(cfg)
+    sources, _ = load_sources(cfg)
+    check_searchable(cfg, sources)
+
+
 def train(cfg, run) -> dict:
     """No learning: build the database, report its size and save it (database.npz) in the run."""
     from charctl.experiments.motion_matching.database import build_database

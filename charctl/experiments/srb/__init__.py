@@ -14,6 +14,7 @@ EXPERIMENT = Experiment(
     summary="single rigid body + QP contact-force tracker + PPO; push-robustness study",
     schema=f"{_PKG}.config:Config",
     train=f"{_PKG}.train:train",
+    preflight=f"{_PKG}.env:preflight",
     evaluate=f"{_PKG}.evaluate:evaluate",
     export=f"{_PKG}.export:export",
     eval_options=(
