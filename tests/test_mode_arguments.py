@@ -153,6 +153,11 @@ TRAIN = [
         ["nosuch_clip"],
     ),
     ("train-srb-clip", "train srb scale=smoke output_root={tmp}/runs reference.clip=kick", ["kick", "walking clip"]),
+    (
+        "train-srb-inertia-frame",
+        "train srb scale=smoke output_root={tmp}/runs body.inertia_pose_frame=100000",
+        ["inertia_pose_frame=100000", "frames 0.."],
+    ),
     (  # the checkpoint used to load first: config.yaml rewritten with the clip and resumes.txt made, then the error
         "train-srb-resume",
         "train srb --resume {srb} reference.clip=kick train.total_samples=4096",

@@ -29,6 +29,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from charctl.errors import CharctlError
 from charctl.experiments.srb.params import EnvParams
 from charctl.experiments.srb.qp import N_POINTS, QPBatch, QPParams, solve_batch
 from charctl.experiments.srb.reference import (
@@ -56,7 +57,12 @@ class Body:
 
 
 def make_body(clip, mass: float, frame: int = 0) -> Body:
-    """The humanoid's composite inertia in `clip`'s pose `frame`, scaled to `mass` (paper §4)."""
+    """The humanoid's composite inertia in `clip`'s pose `frame`, scaled to `mass` (paper §4); a one-line
+    error for a frame the clip does not have (body.inertia_pose_frame)."""
+    if not 0 <= frame < clip.num_frames:
+        raise CharctlError(
+            f"body.inertia_pose_frame={frame} is outside clip {clip.name!r} (frames 0..{clip.num_frames - 1})"
+        )
     inertia, m_full, _ = composite_inertia(clip, frame)
     inertia = inertia * (mass / m_full)
     sole = sole_points_local(clip.skeleton, "right_ankle")
