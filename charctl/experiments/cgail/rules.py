@@ -83,7 +83,7 @@ def pose_key_error(a: Array, b: Array, root_scale: float = 1.0) -> Array:
     xp = namespace(a, b)
     d = a[..., 1:] - b[..., 1:]
     d = d.reshape(d.shape[:-1] + (4, 3))
-    ee = xp.max(xp.sqrt(xp.sum(d * d, axis=-1)), axis=-1)
+    ee = xp.sqrt(xp.max(xp.sum(d * d, axis=-1), axis=-1))  # sqrt of the largest square: the largest distance
     return xp.maximum(ee, root_scale * xp.abs(a[..., 0] - b[..., 0]))
 
 
