@@ -47,7 +47,7 @@ from charctl.experiments.cgail.rules import (
     goal_reward,
     phase_features,
     pose_check,
-    pose_key_error,
+    pose_key_error_frames,
     pose_keys,
     reference_pose_error,
     restart_after_ramp,
@@ -117,8 +117,9 @@ class _IndexRows:
     def put(self, old: torch.Tensor, new: torch.Tensor | float | bool) -> torch.Tensor:
         """A copy of `old` with `new` (per subset row, or one value) written in the subset's rows, in the result
         dtype `torch.where` would give."""
-        dtype = torch.result_type(new, old) if isinstance(new, torch.Tensor) else old.dtype
-        out = old.to(dtype, copy=True)
+        if not isinstance(new, torch.Tensor):
+            return old.clone().index_fill_(0, self.ids, new)
+        out = old.to(torch.result_type(new, old), copy=True)
         out[self.ids] = new
         return out
 
@@ -223,6 +224,7 @@ class CgailDeviceEnv:
         self.rsi_qvel = _pad([s.qvel for s in skills], dev, dt)  # (K, T, nv)
         self.ref_obs = _pad([s.obs for s in skills], dev, dt)  # (K, T, 133)
         self.ref_keys = pose_keys(self.ref_obs)  # (K, T, 13): what the pose error compares
+        self.ref_keys_t = self.ref_keys.transpose(1, 2).contiguous()  # (K, 13, T): frames last (closest-frame search)
         self.clip_frames = torch.as_tensor([len(s.obs) for s in skills], dtype=torch.long, device=dev)
         self.rsi_frames = torch.as_tensor([len(s.qpos) for s in skills], dtype=torch.long, device=dev)
         self.clip_loops = torch.as_tensor([s.loop for s in skills], dtype=torch.bool, device=dev)
@@ -346,7 +348,7 @@ class CgailDeviceEnv:
         rows = _IndexRows(goal) if self.compact_rows else _MaskRows(goal)
         cmd = rows.pick(self.cmd)
         # (n, T); padding repeats frames
-        each = pose_key_error(pose_keys(rows.pick(obs))[:, None], self.ref_keys[cmd], self.root_scale)
+        each = pose_key_error_frames(pose_keys(rows.pick(obs)), self.ref_keys_t[cmd], self.root_scale)
         closest, best = each.min(dim=1)
         return rows.put(timed, closest), rows.put(ref, self.ref_obs[cmd, best])
 
