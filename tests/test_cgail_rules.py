@@ -71,6 +71,19 @@ def test_pose_key_error_broadcasts_over_clip_frames(arr):
     np.testing.assert_allclose(_np(rules.reference_pose_error(arr(obs), arr(clip[1:2]))), [0.3], atol=1e-12)
 
 
+@pytest.mark.parametrize("dtype", [np.float64, np.float32])
+@pytest.mark.parametrize("arr", LIBS)
+def test_pose_key_error_frames_last_gives_the_same_numbers(arr, dtype):
+    """The frames-last form (the torch env's closest-frame search) equals `pose_key_error` over the
+    frame-first clip bit for bit: 50 poses against 3 clips of 47 frames, with a root-height scale."""
+    rng = np.random.default_rng(0)
+    keys, clips = rng.normal(size=(50, 13)).astype(dtype), rng.normal(size=(3, 47, 13)).astype(dtype)
+    cmd = rng.integers(0, 3, size=50)
+    each = rules.pose_key_error(arr(keys)[:, None], arr(clips[cmd]), 2.5)
+    frames_last = np.ascontiguousarray(clips.transpose(0, 2, 1))[cmd]
+    assert np.array_equal(_np(rules.pose_key_error_frames(arr(keys), arr(frames_last), 2.5)), _np(each))
+
+
 @pytest.mark.parametrize("arr", LIBS)
 def test_root_height_threshold_scales_the_root_term_against_the_pose_threshold(arr):
     """Root 0.2 m lower and a hand 0.3 m off: with the pose threshold 0.5 m and a root-height radius of

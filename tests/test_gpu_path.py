@@ -75,6 +75,26 @@ def test_torch_rotations_equal_numpy():
         np.testing.assert_allclose(got.numpy(), want, atol=1e-12)
 
 
+@pytest.mark.parametrize("dtype", [torch.float64, torch.float32])
+def test_gathered_and_written_out_quaternion_forms_agree_bit_for_bit(dtype):
+    """`rotations_torch.multiply` and `to_matrix` gather their terms for small inputs and write them out for large
+    ones; on the same quaternions (zero and negative-zero components included) the two forms give the same bits,
+    signs of zero too."""
+    from charctl.motion import rotations_torch as RT
+
+    g = torch.Generator().manual_seed(0)
+    a, b = (torch.nn.functional.normalize(torch.randn(8, 1000, 4, generator=g, dtype=dtype), dim=-1) for _ in range(2))
+    a[:, ::3, 0], b[:, ::5, 2], a[:, ::7, 1] = 0.0, -0.0, -0.0
+    a[:, ::11] = torch.tensor([0.0, 0.6, 0.0, 0.8], dtype=dtype)  # a heading: exact zeros and ones in its matrix
+    assert a.numel() > RT._GATHER_MAX >= a[0].numel()  # all at once: written out; one row at a time: gathered
+    for whole, parts in (
+        (RT.multiply(a, b), [RT.multiply(x, y) for x, y in zip(a, b)]),
+        (RT.to_matrix(a), [RT.to_matrix(x) for x in a]),
+    ):
+        parts = torch.stack(parts)
+        assert torch.equal(whole, parts) and torch.equal(whole.signbit(), parts.signbit())
+
+
 @pytest.mark.parametrize("clip_name", ["walk", "kick"])
 def test_torch_policy_state_and_disc_obs_equal_numpy(clip_name):
     """The one implementation on torch tensors: same kinematics in, same 241-d state and 133-d observation

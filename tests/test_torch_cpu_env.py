@@ -118,6 +118,56 @@ def test_torch_env_on_cpu_gives_the_numpy_env_observations(fidelity):
     np.testing.assert_array_equal(_np(t_res.unstable), c_res.unstable)
 
 
+def test_row_form_on_the_cpu_gives_the_mask_forms_episodes():
+    """On the CPU the torch env resets, and searches the closest clip frame, on the rows concerned only
+    (`compact_rows`); on a GPU it does both in mask form. From the same seed, actions and extra resets the two
+    forms give the same episodes (resets, commands, reference frames, ends, simulator states bit for bit) and
+    the same states, observations and rewards up to float64 rounding: a transcendental function may round
+    its last bit differently on a few rows (scalar kernel) than on all of them (vectorised kernel)."""
+    from omegaconf import OmegaConf
+
+    from charctl.config import compose_config
+    from charctl.experiments.cgail.config import Config
+    from charctl.experiments.cgail.env_torch import CgailDeviceEnv
+    from charctl.experiments.cgail.skills import load_skills, select_skills
+    from charctl.sim.torch_view import TorchBatchedHumanoid
+
+    n = 16
+    overrides = ["scale=smoke", f"env.num_envs={n}", "env.phase_obs=true", "env.skill_fall_weight=0.5"]
+    cfg = compose_config("cgail", [*overrides, "env.switch_prob=0.2"], Config)
+    skills = load_skills(select_skills(cfg), cfg.env.control_hz)
+    env_cfg = OmegaConf.to_object(cfg.env)
+    rules = dict(pose_error_threshold=0.15, pose_error_grace_steps=2, reference_reward=True, yaw_error_threshold=0.5)
+    envs = []
+    for compact in (True, False):
+        env = CgailDeviceEnv(skills, env_cfg, seed=3, device="cpu", sim=TorchBatchedHumanoid(n), **rules)
+        assert env.compact_rows  # the CPU's form; the mask form is the GPU's, forced here
+        env.compact_rows = compact
+        env.reset(torch.ones(n, dtype=torch.bool))
+        envs.append(env)
+    rows, masks = envs
+    g = torch.Generator().manual_seed(0)
+    exact = ("terminated", "truncated", "unstable", "pose_ended")
+    ends = 0
+    for _ in range(40):
+        actions = 0.3 * torch.randn(n, 28, generator=g)
+        extra = torch.rand(n, generator=g) < 0.1  # as the low-style termination's resets
+        results = [env.step(actions) for env in envs]
+        for env in envs:
+            env.reset(extra)
+        for name in exact:
+            assert torch.equal(getattr(results[0], name), getattr(results[1], name)), name
+        for name in ("state", "obs", "pair_next", "final_state", "r_goal", "r_track"):
+            torch.testing.assert_close(getattr(results[0], name), getattr(results[1], name), rtol=0, atol=1e-12)
+        for name in ("cmd", "prev_cmd", "steps", "ref_frame", "ref_active", "ref_grace"):
+            assert torch.equal(getattr(rows, name), getattr(masks, name)), name
+        for name in ("w", "goal_angle", "yaw_err", "fall_rate", "state", "obs"):
+            torch.testing.assert_close(getattr(rows, name), getattr(masks, name), rtol=0, atol=1e-12)
+        assert torch.equal(rows.sim.qpos, masks.sim.qpos) and torch.equal(rows.sim.qvel, masks.sim.qvel)
+        ends += int((results[0].terminated | results[0].truncated).sum())
+    assert ends > 0 and rows.fall_count == masks.fall_count
+
+
 @pytest.mark.slow
 def test_smoke_training_with_the_torch_backend(tmp_path):
     """`charctl train cgail scale=smoke env.backend=torch device=cpu` with the fidelity recipe's env rules and

@@ -10,8 +10,11 @@ the time limit. The rules themselves are `features.py` and `rules.py`, shared wi
 Every per-env quantity is a tensor on the simulation device and every branch that depends on
 data is a mask (`torch.where`), so a control step issues no host round trip: resets run for a
 (possibly all-false) mask each step, with RSI candidates drawn for every env and written only
-where the mask is set. Random numbers come from a torch generator on the device (seeded), so the
-two backends give equally distributed, not identical, episodes.
+where the mask is set. On the CPU (env.backend=torch, or Warp's CPU device), where reading a mask
+costs nothing, the work for such a subset runs on its rows only (`compact_rows`: the resets and the
+closest-frame search of the pose error, as the numpy env does), with the same random numbers drawn.
+Random numbers come from a torch generator on the device (seeded), so the two backends give equally
+distributed, not identical, episodes.
 
 Units and frames: radians (yaw about world +y, PD targets), metres, m/s; world y-up.
 """
@@ -44,7 +47,7 @@ from charctl.experiments.cgail.rules import (
     goal_reward,
     phase_features,
     pose_check,
-    pose_key_error,
+    pose_key_error_frames,
     pose_keys,
     reference_pose_error,
     restart_after_ramp,
@@ -76,6 +79,49 @@ class DeviceStepResult:
     truncated: torch.Tensor  # (N,) bool: time limit or end of a non-looping reference clip
     unstable: torch.Tensor  # (N,) bool: simulator blow-up this step
     pose_ended: torch.Tensor | None = None  # (N,) bool: ended by a large pose error (part of `terminated`)
+
+
+class _MaskRows:
+    """A data-dependent subset of the envs (the envs a reset writes, the envs scored against their closest clip
+    frame) as its (N,) bool mask: values computed for every env and written where the mask is set
+    (`torch.where`), so nothing is read back to the host (the form on a GPU)."""
+
+    def __init__(self, mask: torch.Tensor):
+        self.mask = self.ids = mask
+
+    def pick(self, x: torch.Tensor) -> torch.Tensor:
+        """The rows of per-env `x` the values are computed for: all of them."""
+        return x
+
+    def put(self, old: torch.Tensor, new: torch.Tensor | float | bool) -> torch.Tensor:
+        """`old` with `new` written in the subset's rows (`new` per env, or one value for all)."""
+        if not isinstance(new, torch.Tensor):
+            return torch.where(self.mask, torch.full_like(old, new), old)
+        return torch.where(self.mask.view(-1, *[1] * (new.dim() - 1)), new, old)
+
+
+class _IndexRows:
+    """The same subset as its integer ids (`CgailDeviceEnv.compact_rows`: on the CPU, where reading the mask costs
+    nothing): values computed for those rows only, as the numpy env does, and written into a copy (tensors
+    handed out earlier, e.g. the last step's state, do not change). Every quantity is a row-wise function of its
+    env, so the written values are `_MaskRows`' (up to the last bit of a transcendental function, whose
+    vectorised and scalar kernels may round differently: ~1e-16 rad on a heading)."""
+
+    def __init__(self, mask: torch.Tensor):
+        self.ids = torch.nonzero(mask).squeeze(1)
+
+    def pick(self, x: torch.Tensor) -> torch.Tensor:
+        """The subset's rows of per-env `x`."""
+        return x[self.ids]
+
+    def put(self, old: torch.Tensor, new: torch.Tensor | float | bool) -> torch.Tensor:
+        """A copy of `old` with `new` (per subset row, or one value) written in the subset's rows, in the result
+        dtype `torch.where` would give."""
+        if not isinstance(new, torch.Tensor):
+            return old.clone().index_fill_(0, self.ids, new)
+        out = old.to(torch.result_type(new, old), copy=True)
+        out[self.ids] = new
+        return out
 
 
 def _pad(arrays: list[np.ndarray], device: torch.device, dtype=torch.float32) -> torch.Tensor:
@@ -134,6 +180,10 @@ class CgailDeviceEnv:
         # the simulator's float dtype: float32 on MuJoCo Warp, float64 over C MuJoCo (env.backend=torch,
         # `charctl.sim.torch_view`); features and rules run in it, the policy state and disc obs are float32
         self.dtype = getattr(self.sim, "dtype", torch.float32)
+        # on the CPU (reading a mask there is free) the work for a data-dependent subset of the envs runs on those
+        # rows only, as in the numpy env: the resets (the kinematics and features of every env cost as much as a
+        # step's) and the closest-frame search of the pose error; on a GPU it stays in mask form (no host round trip)
+        self.compact_rows = dev.type == "cpu"
         self.max_steps = int(round(env_cfg.episode_seconds * env_cfg.control_hz))
         self._load_skill_tables(skills)
         self.rest = torch.zeros(self.sim.layout.nu, dtype=self.dtype, device=dev)
@@ -174,6 +224,7 @@ class CgailDeviceEnv:
         self.rsi_qvel = _pad([s.qvel for s in skills], dev, dt)  # (K, T, nv)
         self.ref_obs = _pad([s.obs for s in skills], dev, dt)  # (K, T, 133)
         self.ref_keys = pose_keys(self.ref_obs)  # (K, T, 13): what the pose error compares
+        self.ref_keys_t = self.ref_keys.transpose(1, 2).contiguous()  # (K, 13, T): frames last (closest-frame search)
         self.clip_frames = torch.as_tensor([len(s.obs) for s in skills], dtype=torch.long, device=dev)
         self.rsi_frames = torch.as_tensor([len(s.qpos) for s in skills], dtype=torch.long, device=dev)
         self.clip_loops = torch.as_tensor([s.loop for s in skills], dtype=torch.bool, device=dev)
@@ -210,14 +261,19 @@ class CgailDeviceEnv:
         self.w = advance_ramp(self.w, self.cfg.ramp_frames)
 
     def _new_goal(self, mask: torch.Tensor, root_rot: torch.Tensor) -> None:
+        self.goal_angle = torch.where(mask, self._goal(root_rot, self._rand()), self.goal_angle)
+
+    def _goal(self, root_rot: torch.Tensor, u: torch.Tensor) -> torch.Tensor:
+        """Heading goals (world yaw, rad) within goal_max_angle_deg of the heading of `root_rot`, from uniforms `u`."""
         spread = math.radians(self.cfg.goal_max_angle_deg)
-        goal = RT.yaw_about_y(root_rot) + (2.0 * self._rand() - 1.0) * spread
-        self.goal_angle = torch.where(mask, goal, self.goal_angle)
+        return RT.yaw_about_y(root_rot) + (2.0 * u - 1.0) * spread
 
     # ------------------------------------------------------------------ reset
     def reset(self, mask) -> None:
         """RSI of the envs in `mask` ((N,) bool or integer ids) from a random frame of a random skill
-        (or the forced one); candidates are drawn for every env, written where the mask is set."""
+        (or the forced one). The random numbers are drawn for every env whatever the mask (the generator's
+        stream does not depend on it); the reset envs' state is written in mask form or, on the CPU
+        (`compact_rows`), for their rows only, with the same values."""
         mask = self.sim.as_mask(mask)
         skill = self._sample_skills()
         if self.forced_command is not None:
@@ -227,45 +283,50 @@ class CgailDeviceEnv:
         frames = torch.minimum(self._randint(n_rsi - 1), n_rsi - 2).clamp(min=0)  # [0, T - 1) as numpy's integers
         if self.start_frame is not None:
             frames = torch.minimum(torch.full_like(frames, int(self.start_frame)), n_rsi - 1)
-        qpos = self.rsi_qpos[skill, frames].clone()
-        qvel = self.rsi_qvel[skill, frames].clone()
         yaw = (
             (2.0 * self._rand() - 1.0) * math.pi
             if self.random_yaw
             else torch.zeros(self.N, dtype=self.dtype, device=self.device)
         )
-        turn = RT.heading_quat(yaw)
+        goal_u = self._rand()  # the heading goals' draw
+        rows = _IndexRows(mask) if self.compact_rows else _MaskRows(mask)
+        if self.compact_rows and rows.ids.numel() == 0:
+            return  # nothing to write (the mask form writes every row's old value back)
+        skill, frames = rows.pick(skill), rows.pick(frames)
+        qpos = self.rsi_qpos[skill, frames]  # advanced indexing: copies
+        qvel = self.rsi_qvel[skill, frames]
+        turn = RT.heading_quat(rows.pick(yaw))
         qpos[:, 0] = 0.0
         qpos[:, 2] = 0.0
         root = RT.wxyz_to_xyzw(qpos[:, 3:7])
         qpos[:, 3:7] = RT.xyzw_to_wxyz(RT.multiply(turn, root))
         qvel[:, :3] = RT.rotate(turn, qvel[:, :3])  # world linear velocity turns; angular is body-local
-        self.sim.set_state(mask, qpos, qvel)
-        self.cmd = torch.where(mask, skill, self.cmd)
-        self.prev_cmd = torch.where(mask, skill, self.prev_cmd)
-        self.w = torch.where(mask, torch.ones_like(self.w), self.w)
-        self.steps = torch.where(mask, torch.zeros_like(self.steps), self.steps)
-        self.ref_frame = torch.where(mask, frames, self.ref_frame)
-        self.ref_active = self.ref_active | mask
-        self.ref_grace = torch.where(mask, torch.zeros_like(self.ref_grace), self.ref_grace)
-        self.yaw_err = torch.where(mask, torch.zeros_like(self.yaw_err), self.yaw_err)
-        k = sim_kinematics(self.sim)
-        self._new_goal(mask, k.body_rot[:, 0])
-        m = mask[:, None]
-        state, obs = (x.float() for x in self._features(k))
-        self._state = torch.where(m, state, self._state)
-        self._obs = torch.where(m, obs, self._obs)
+        self.sim.set_state(rows.ids, qpos, qvel)
+        self.cmd = rows.put(self.cmd, skill)
+        self.prev_cmd = rows.put(self.prev_cmd, skill)
+        self.w = rows.put(self.w, 1.0)
+        self.steps = rows.put(self.steps, 0)
+        self.ref_frame = rows.put(self.ref_frame, frames)
+        self.ref_active = rows.put(self.ref_active, True)
+        self.ref_grace = rows.put(self.ref_grace, 0)
+        self.yaw_err = rows.put(self.yaw_err, 0.0)
+        k = sim_kinematics(self.sim, None if isinstance(rows, _MaskRows) else rows.ids)
+        self.goal_angle = rows.put(self.goal_angle, self._goal(k.body_rot[:, 0], rows.pick(goal_u)))
+        state, obs = self._features(k, rows.pick)
+        self._state = rows.put(self._state, state.float())
+        self._obs = rows.put(self._obs, obs.float())
 
     # ------------------------------------------------------------------ observation
-    def _features(self, k: Kinematics) -> tuple[torch.Tensor, torch.Tensor]:
-        """(policy state (N, state_dim), disc obs (N, 133)): the shared features (`features.py`, `rules.py`)
-        with one heading frame, the heading goal and, for the tracking baseline, the clip phase."""
+    def _features(self, k: Kinematics, pick=lambda x: x) -> tuple[torch.Tensor, torch.Tensor]:
+        """(policy state (n, state_dim), disc obs (n, 133)): the shared features (`features.py`, `rules.py`)
+        with one heading frame, the heading goal and, for the tracking baseline, the clip phase; of every env
+        or, for a reset, of the rows `pick` takes from per-env tensors (`k` is of those rows)."""
         f = heading_frame(k)
-        heading = RT.yaw_about_y(k.body_rot[:, 0])
-        parts = [policy_state(k, f), goal_features(self.goal_angle, heading, self.has_goal[self.cmd])]
+        cmd = pick(self.cmd)
+        parts = [policy_state(k, f), goal_features(pick(self.goal_angle), f.heading, self.has_goal[cmd])]
         if self.tracking or self.phase_obs:  # env.phase_obs: (0, 0) with a heading goal or while a ramp runs
-            shown = (~self.has_goal[self.cmd] & self.ref_active) if self.phase_obs else None
-            parts.append(phase_features(self.ref_frame, self.clip_frames[self.cmd], shown).float())
+            shown = (~self.has_goal[cmd] & pick(self.ref_active)) if self.phase_obs else None
+            parts.append(phase_features(pick(self.ref_frame), self.clip_frames[cmd], shown).float())
         return torch.cat(parts, dim=1), disc_obs(k, f)
 
     def _advance_phase(self, restart: bool = False) -> tuple[torch.Tensor, torch.Tensor]:
@@ -283,12 +344,13 @@ class CgailDeviceEnv:
         """((N,) m, (N, 133)) as `CgailEnv._pose_error`: against the timed reference `ref`, or, for skills with
         a heading goal, against their clip's closest frame (every env is scored both ways; a mask picks)."""
         timed = reference_pose_error(obs, ref, self.root_scale)
-        # (N, T); padding repeats frames
-        each = pose_key_error(pose_keys(obs)[:, None], self.ref_keys[self.cmd], self.root_scale)
-        closest, best = each.min(dim=1)
         goal = self.has_goal[self.cmd]
-        scored = torch.where(goal[:, None], self.ref_obs[self.cmd, best], ref)
-        return torch.where(goal, closest, timed), scored
+        rows = _IndexRows(goal) if self.compact_rows else _MaskRows(goal)
+        cmd = rows.pick(self.cmd)
+        # (n, T); padding repeats frames
+        each = pose_key_error_frames(pose_keys(rows.pick(obs)), self.ref_keys_t[cmd], self.root_scale)
+        closest, best = each.min(dim=1)
+        return rows.put(timed, closest), rows.put(ref, self.ref_obs[cmd, best])
 
     def _restart_reference_after_ramp(self) -> None:
         """Envs whose command ramp has just finished: the new clip's reference starts at frame 0."""

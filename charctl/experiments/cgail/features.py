@@ -89,6 +89,7 @@ class HeadingFrame:
     root: Array  # (N, 3) world root position
     rel: Array  # (N, 15, 3) body positions relative to the root, heading frame
     lin: Array  # (N, 15, 3) body linear velocities, heading frame
+    heading: Array | None = None  # (N,) the root's yaw about +y (rad) that h_t removes
 
     def rotate(self, v: Array) -> Array:
         """(N, 3) or (N, B, 3) world vectors in the heading frame."""
@@ -101,10 +102,11 @@ def heading_frame(k: Kinematics) -> HeadingFrame:
     """The shared heading-frame terms of a batch (reuses `k.body_mat` when the caller has it)."""
     RX = rotations_for(k.body_pos)
     root = k.body_pos[:, 0]
-    h_t = RX.to_matrix(heading_inverse(k.body_rot[:, 0])).swapaxes(-1, -2)
+    heading = RX.yaw_about_y(k.body_rot[:, 0])
+    h_t = RX.to_matrix(RX.heading_quat(-heading)).swapaxes(-1, -2)  # heading_inverse, keeping the yaw
     rel = (k.body_pos - root[:, None]) @ h_t
     body_mat = RX.to_matrix(k.body_rot) if k.body_mat is None else k.body_mat
-    return HeadingFrame(h_t, body_mat, root, rel, k.lin_vel @ h_t)
+    return HeadingFrame(h_t, body_mat, root, rel, k.lin_vel @ h_t, heading)
 
 
 def _first_two_columns(m: Array) -> Array:

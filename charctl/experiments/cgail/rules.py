@@ -83,8 +83,20 @@ def pose_key_error(a: Array, b: Array, root_scale: float = 1.0) -> Array:
     xp = namespace(a, b)
     d = a[..., 1:] - b[..., 1:]
     d = d.reshape(d.shape[:-1] + (4, 3))
-    ee = xp.max(xp.sqrt(xp.sum(d * d, axis=-1)), axis=-1)
+    ee = xp.sqrt(xp.max(xp.sum(d * d, axis=-1), axis=-1))  # sqrt of the largest square: the largest distance
     return xp.maximum(ee, root_scale * xp.abs(a[..., 0] - b[..., 0]))
+
+
+def pose_key_error_frames(keys: Array, frames: Array, root_scale: float = 1.0) -> Array:
+    """(n, T) m: `pose_key_error` of `pose_keys` arrays `keys` (n, 13) against T frames each, given frames last
+    as `frames` (n, 13, T) (a clip's `pose_keys` with the frame axis moved to the end): the same operations on
+    the same numbers, so the same values, laid out so that every one runs along the frames (the closest-frame
+    search of the pose error; over the frame-first layout, sums and maxima over axes of 3 and 4 are slow in torch)."""
+    xp = namespace(keys, frames)
+    d = keys[:, 1:, None] - frames[:, 1:]
+    d = xp.reshape(d, (d.shape[0], 4, 3, d.shape[-1]))
+    ee = xp.sqrt(xp.max(xp.sum(d * d, axis=2), axis=1))
+    return xp.maximum(ee, root_scale * xp.abs(keys[:, :1] - frames[:, 0]))
 
 
 def reference_pose_error(obs: Array, ref: Array, root_scale: float = 1.0) -> Array:

@@ -21,24 +21,33 @@ from charctl.motion.skeleton import load_skeleton
 
 
 @functools.lru_cache(maxsize=8)
-def _mass_tables(device: str) -> tuple[torch.Tensor, torch.Tensor]:
-    """(body masses (15,), local COM offsets (15, 3)) on `device`, float64."""
+def _mass_tables(device: str, dtype: torch.dtype = torch.float64) -> tuple[torch.Tensor, torch.Tensor]:
+    """(body masses (15,), local COM offsets (15, 3)) on `device`, in `dtype` (cast from float64)."""
     skel = load_skeleton()
     dev = torch.device(device)
-    masses = torch.as_tensor(skel.masses, dtype=torch.float64, device=dev)
-    return masses, torch.as_tensor(skel.com_local, dtype=torch.float64, device=dev)
+    masses = torch.as_tensor(skel.masses, dtype=torch.float64, device=dev).to(dtype)
+    return masses, torch.as_tensor(skel.com_local, dtype=torch.float64, device=dev).to(dtype)
 
 
-def sim_kinematics(sim) -> Kinematics:
-    """Kinematics of a `WarpBatchedHumanoid` after a step (exact MuJoCo velocities), on its device.
+def sim_kinematics(sim, rows: torch.Tensor | None = None) -> Kinematics:
+    """Kinematics of a `WarpBatchedHumanoid` after a step (exact MuJoCo velocities), on its device: of every
+    env, or of the envs `rows` ((n,) integer ids; the CPU env's resets, `CgailDeviceEnv.compact_rows`), read
+    for those rows only where the simulator can (`TorchBatchedHumanoid.body_rows`).
 
     COM velocity = mass-weighted velocities of the body centres of mass (frame origin + rotated
     local COM offset), as in `features.sim_kinematics`.
     """
-    lin, ang = sim.body_velocities()
-    pos, rot = sim.body_pos, sim.body_quat_xyzw
-    masses, com_local = (t.to(pos.dtype) for t in _mass_tables(str(pos.device)))
+    if rows is not None and hasattr(sim, "body_rows"):
+        pos, rot, lin, ang, com = sim.body_rows(rows)
+    else:
+        lin, ang = sim.body_velocities()
+        pos, rot, com = sim.body_pos, sim.body_quat_xyzw, sim.com()
+        if rows is None:
+            com = com.clone()  # a view of the simulator's live array
+        else:
+            lin, ang, pos, rot, com = lin[rows], ang[rows], pos[rows], rot[rows], com[rows]
+    masses, com_local = _mass_tables(str(pos.device), pos.dtype)
     offset = RT.rotate(rot, com_local.expand(pos.shape))
     com_vel_bodies = lin + torch.cross(ang, offset, dim=-1)
     com_vel = torch.einsum("nbi,b->ni", com_vel_bodies, masses) / sim.total_mass
-    return Kinematics(pos, rot, lin, ang, sim.com().clone(), com_vel)
+    return Kinematics(pos, rot, lin, ang, com, com_vel)
