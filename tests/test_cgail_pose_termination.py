@@ -77,6 +77,30 @@ def test_locomotion_clips_are_scored_against_their_closest_frame_and_others_agai
     assert err[1] == pytest.approx(reference_pose_error(obs[1:], skills[1].obs[3:4])[0]) and err[1] > 0.5
 
 
+def test_a_goal_reference_window_moves_the_walk_reference_on_past_a_held_pose(skills):
+    """reward.goal_reference_window: a walk pose held still (a shuffle that never leaves its frame) is scored 0
+    against the closest frame anywhere, but with a 3-frame window the reference moves on one frame or more per
+    step, so the held pose's error grows with the gait cycle it leaves out (past 0.15 m within 19 steps, half a
+    cycle of the 38-frame loop), and the reference frames are 18, 19, ... as the clip's own timing."""
+    held = skills[0].obs[17][None]
+    errors = {}
+    for window in (0, 3):
+        cfg = OmegaConf.structured(EnvConfig(num_envs=1, switch_prob=0.0))
+        env = CgailEnv(skills, cfg, seed=0, pose_error_threshold=0.5, goal_reference_window=window)
+        env.cmd[:], env.ref_frame[:], env.ref_grace[:] = 0, 17, 0
+        errs, frames = [], []
+        for _ in range(19):
+            ref, _ = env._advance_phase(restart=True)
+            err, _ = env._pose_error(held, ref)
+            errs.append(float(err[0]))
+            frames.append(int(env.ref_frame[0]))
+        errors[window] = errs
+        if window:
+            assert frames == list(range(18, 37))  # the closest allowed frame is always the nearest one ahead
+    assert max(errors[0]) == pytest.approx(0.0, abs=1e-12)
+    assert errors[3][0] < 0.1 and max(errors[3]) > 0.15
+
+
 def test_an_in_place_looping_clip_keeps_its_timing():
     """The jump loops but has no heading goal: a pose held from its crouch is scored against the frame the
     clip has moved on to (the closest-frame rule would let a standing policy pass it)."""

@@ -124,6 +124,32 @@ def test_yaw_error_adds_up_the_yaw_rate_missed_and_counts_against_the_pose_thres
     np.testing.assert_allclose(_np(out), [1.7 / 3.0, 0.1, 0.1, 0.1], atol=1e-6)
 
 
+@pytest.mark.parametrize("arr", LIBS)
+def test_goal_reference_frame_moves_on_within_its_window(arr):
+    """reward.goal_reference_window on a looping 6-frame clip (period 5: frame 5 is frame 0 again), window 2.
+    Row 0, advanced to frame 4: frames 4 and 0 (wrapped) are allowed, 0.2 beats 0.3, although frame 1 (0.0)
+    is the closest anywhere. Row 1, advanced to 1: frames 1 and 2, 0.4 wins over 0.5 (frames 0, 3, 4 at 0.0 are
+    out). Row 2 is as row 1 but in grace steps (not synced): the whole clip, frame 0. Window 0: the whole clip."""
+    each = np.array(
+        [
+            [0.3, 0.0, 0.1, 0.1, 0.2, 0.0],
+            [0.0, 0.5, 0.4, 0.0, 0.0, 0.0],
+            [0.0, 0.5, 0.4, 0.0, 0.0, 0.0],
+        ]
+    )
+    advanced, loops, n = np.array([4, 1, 1]), np.array([True, True, True]), np.array([6, 6, 6])
+    synced = np.array([True, True, False])
+    best = rules.goal_reference_frame(arr(each), arr(advanced), arr(loops), arr(n), 2, arr(synced))
+    assert _np(best).tolist() == [4, 2, 0]
+    anywhere = rules.goal_reference_frame(arr(each), arr(advanced), arr(loops), arr(n), 0, arr(synced))
+    assert _np(anywhere).tolist() == [1, 0, 0]
+    # a non-looping clip's period is its length: advanced to 5 with window 2 allows frames 5 and 0
+    best = rules.goal_reference_frame(
+        arr(each[:1]), arr(np.array([5])), arr(np.array([False])), arr(np.array([6])), 2, arr(np.array([True]))
+    )
+    assert _np(best).tolist() == [5]
+
+
 def test_state_width():
     assert rules.state_dim(False) == 243 and rules.state_dim(True) == 245
 

@@ -79,8 +79,10 @@ def test_backend_torch_is_accepted_on_the_cpu_only():
         resolve_backend("torch", "cuda")
 
 
-@pytest.mark.parametrize("fidelity", [False, True], ids=["default", "phase-pose-track"])
-def test_torch_env_on_cpu_gives_the_numpy_env_observations(fidelity):
+@pytest.mark.parametrize(
+    ("fidelity", "window"), [(False, 0), (True, 0), (True, 3)], ids=["default", "phase-pose-track", "goal-window"]
+)
+def test_torch_env_on_cpu_gives_the_numpy_env_observations(fidelity, window):
     """Same skill, same RSI frame, no random yaw, goal straight ahead: the torch env over the adapter gives
     the numpy env's state, obs, rewards and episode ends after reset and after one step with the same
     actions; with the fidelity recipe's env rules too (env.phase_obs, the pose-error check, r_track there).
@@ -100,6 +102,8 @@ def test_torch_env_on_cpu_gives_the_numpy_env_observations(fidelity):
     env_cfg = OmegaConf.to_object(cfg.env)
     forced = np.array([0, 1, 0, 1])
     rules = dict(pose_error_threshold=0.10, pose_error_grace_steps=0, reference_reward=True) if fidelity else {}
+    if window:  # reward.goal_reference_window: the walk's reference moves on from its matched frame
+        rules["goal_reference_window"] = window
     c_env = CgailEnv(skills, env_cfg, seed=0, **rules)
     t_env = CgailDeviceEnv(skills, env_cfg, seed=0, device="cpu", sim=TorchBatchedHumanoid(4), **rules)
     c_env.forced_command, t_env.forced_command = forced, torch.as_tensor(forced)
@@ -113,12 +117,14 @@ def test_torch_env_on_cpu_gives_the_numpy_env_observations(fidelity):
     actions = np.random.default_rng(0).normal(scale=0.1, size=(4, 28)).astype(np.float32).astype(np.float64)
     c_res, t_res = c_env.step(actions), t_env.step(torch.as_tensor(actions, dtype=torch.float32))
     assert_step_matches_cpu_env(c_env, c_res, t_env, t_res, fidelity)
+    np.testing.assert_array_equal(_np(t_env.ref_frame), c_env.ref_frame)
     np.testing.assert_allclose(_np(t_res.state), c_res.state, atol=2e-3)
     np.testing.assert_array_equal(_np(t_res.truncated), c_res.truncated)
     np.testing.assert_array_equal(_np(t_res.unstable), c_res.unstable)
 
 
-def test_row_form_on_the_cpu_gives_the_mask_forms_episodes():
+@pytest.mark.parametrize("window", [0, 3], ids=["closest-frame", "goal-window"])
+def test_row_form_on_the_cpu_gives_the_mask_forms_episodes(window):
     """On the CPU the torch env resets, and searches the closest clip frame, on the rows concerned only
     (`compact_rows`); on a GPU it does both in mask form. From the same seed, actions and extra resets the two
     forms give the same episodes (resets, commands, reference frames, ends, simulator states bit for bit) and
@@ -138,6 +144,7 @@ def test_row_form_on_the_cpu_gives_the_mask_forms_episodes():
     skills = load_skills(select_skills(cfg), cfg.env.control_hz)
     env_cfg = OmegaConf.to_object(cfg.env)
     rules = dict(pose_error_threshold=0.15, pose_error_grace_steps=2, reference_reward=True, yaw_error_threshold=0.5)
+    rules["goal_reference_window"] = window
     envs = []
     for compact in (True, False):
         env = CgailDeviceEnv(skills, env_cfg, seed=3, device="cpu", sim=TorchBatchedHumanoid(n), **rules)

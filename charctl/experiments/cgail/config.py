@@ -121,6 +121,14 @@ class RewardConfig:
     # done without turning passes it; the spins turn 2*pi per loop (4.7-5.7 rad/s), the kicks 2.1 rad.
     # 0 = off. Needs pose_error_threshold > 0. docs/cgail.md, "Flight".
     yaw_error_threshold: float = ranged(0.0, ge=0)
+    # Heading-goal skills' reference window (control steps' worth of clip frames): 0 = walk and run are scored
+    # (pose check, w_track) against their clip's closest frame anywhere, which a shuffle that stays on a few
+    # frames passes (its closest frame did not advance: 0.00 frames/step against 1.3 for a full-stride walk).
+    # w > 0 = against the closest of the w frames from the reference advanced one step, so the reference moves
+    # on by 1..w frames per step (up to w times the clip's cadence) and the whole gait cycle is asked for; the
+    # whole clip is searched in grace steps and ramps (re-sync). Needs pose_error_threshold > 0.
+    # docs/cgail.md, "Walk: a reference that moves on".
+    goal_reference_window: int = ranged(0, ge=0)
     # Weight w_T of a DeepMimic tracking reward (env.tracking_reward, in [0, 1]) against the pose-error check's
     # reference (the timed frame of a non-looping clip, the closest frame of a looping one), added to eq 4.1
     # where the reference is checked (0 during ramps and grace steps). Needs pose_error_threshold > 0.
@@ -228,6 +236,7 @@ class Config(BaseConfig):
                 "reward.pose_error_threshold",
                 "reward.root_height_threshold",
                 "reward.yaw_error_threshold",
+                "reward.goal_reference_window",
                 "reward.w_track",
             ]
         return keys
@@ -260,8 +269,8 @@ def _check_skills(cfg) -> str | None:
 
 def _check_rewards(cfg) -> str | None:
     """The early terminations, the tracking reward and the multi-skill tracking baseline. The ranges of
-    low_style_threshold, low_style_steps, pose_error_threshold, pose_error_grace_steps, root_height_threshold
-    and yaw_error_threshold are declared on the fields."""
+    low_style_threshold, low_style_steps, pose_error_threshold, pose_error_grace_steps, root_height_threshold,
+    yaw_error_threshold and goal_reference_window are declared on the fields."""
     r = cfg.reward
     if r.low_style_threshold > 0 and r.kind != "adversarial":
         return "reward.low_style_threshold > 0 needs reward.kind=adversarial"
@@ -271,6 +280,8 @@ def _check_rewards(cfg) -> str | None:
         return "reward.root_height_threshold must be >= 0, and > 0 only with reward.pose_error_threshold > 0"
     if r.yaw_error_threshold > 0 and r.pose_error_threshold <= 0:
         return "reward.yaw_error_threshold must be >= 0, and > 0 only with reward.pose_error_threshold > 0"
+    if r.goal_reference_window > 0 and r.pose_error_threshold <= 0:
+        return "reward.goal_reference_window must be >= 0, and > 0 only with reward.pose_error_threshold > 0"
     # w_track's >= 0 stays here, undeclared: tests/test_config_help.py pins w_track as a knob with no declared range
     if r.w_track < 0 or (r.w_track > 0 and r.pose_error_threshold <= 0):
         return "reward.w_track must be >= 0, and > 0 only with reward.pose_error_threshold > 0 (its reference)"

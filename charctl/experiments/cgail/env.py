@@ -36,6 +36,7 @@ from charctl.experiments.cgail.rules import (
     count_down_grace,
     episode_end,
     goal_features,
+    goal_reference_frame,
     goal_reward,
     phase_features,
     pose_check,
@@ -82,6 +83,7 @@ class CgailEnv:
         pose_error_grace_steps: int = 10,
         root_height_threshold: float = 0.0,
         yaw_error_threshold: float = 0.0,
+        goal_reference_window: int = 0,
         reference_reward: bool = False,
     ):
         self.skills = skills
@@ -90,6 +92,7 @@ class CgailEnv:
         self.pose_threshold, self.pose_grace = float(pose_error_threshold), int(pose_error_grace_steps)
         self.root_scale = root_height_scale(self.pose_threshold, float(root_height_threshold))
         self.yaw_scale = yaw_scale(self.pose_threshold, float(yaw_error_threshold))  # 0: no heading check
+        self.goal_window = int(goal_reference_window)  # 0: heading-goal skills scored against the closest frame
         self.reference_reward = bool(reference_reward)  # r_track against that reference (reward.w_track)
         self.cfg = env_cfg = plain_section(env_cfg)  # typed fields, cheap reads in the step loop
         # env.phase_obs: the timed reference's phase in the state of the adversarial policy (training and evaluation)
@@ -243,17 +246,24 @@ class CgailEnv:
 
     def _pose_error(self, obs: np.ndarray, ref: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """((N,) m, (N, 133)): `reference_pose_error` against the timed reference `ref`, except for skills with a
-        heading goal (locomotion), scored against their clip's closest frame: a walk at a cadence of its own is
-        no error. In-place looping clips (jump, dances, spinkick) keep the timed reference, so standing in
+        heading goal (locomotion), scored against their clip's closest frame (`rules.goal_reference_frame`: the
+        whole clip, or with reward.goal_reference_window a few frames on from the last one): a walk at a cadence
+        of its own is no error. In-place looping clips (jump, dances, spinkick) keep the timed reference, so standing in
         one of their poses is an error once the clip moves on. Returns the reference each env was scored
         against as well."""
         err, ref = reference_pose_error(obs, ref, self.root_scale), ref.copy()
+        synced = self.ref_active & (self.ref_grace == 0)
         for s in np.unique(self.cmd[self.has_goal[self.cmd]]):
             m = np.flatnonzero(self.cmd == s)
             clip = self.skills[s].obs
             each = pose_key_error(pose_keys(obs[m])[:, None], pose_keys(clip)[None], self.root_scale)  # (n, T) m
-            best = each.argmin(axis=1)
+            n = np.full(len(m), len(clip))
+            best = goal_reference_frame(
+                each, self.ref_frame[m], np.full(len(m), self.skills[s].loop), n, self.goal_window, synced[m]
+            )
             err[m], ref[m] = each[np.arange(len(m)), best], clip[best]
+            if self.goal_window > 0:  # reward.goal_reference_window: the reference moves on from the matched frame
+                self.ref_frame[m] = best
         return err, ref
 
     def _restart_reference_after_ramp(self) -> None:

@@ -44,6 +44,7 @@ from charctl.experiments.cgail.rules import (
     count_down_grace,
     episode_end,
     goal_features,
+    goal_reference_frame,
     goal_reward,
     phase_features,
     pose_check,
@@ -150,6 +151,7 @@ class CgailDeviceEnv:
         pose_error_grace_steps: int = 10,
         root_height_threshold: float = 0.0,
         yaw_error_threshold: float = 0.0,
+        goal_reference_window: int = 0,
         reference_reward: bool = False,
         device: str | torch.device = "cpu",
         sim=None,
@@ -163,6 +165,7 @@ class CgailDeviceEnv:
         self.pose_threshold, self.pose_grace = float(pose_error_threshold), int(pose_error_grace_steps)
         self.root_scale = root_height_scale(self.pose_threshold, float(root_height_threshold))
         self.yaw_scale = yaw_scale(self.pose_threshold, float(yaw_error_threshold))  # 0: no heading check
+        self.goal_window = int(goal_reference_window)  # 0: heading-goal skills scored against the closest frame
         self.reference_reward = bool(reference_reward)
         self.phase_obs = bool(getattr(env_cfg, "phase_obs", False)) and not tracking
         self.timed_reference = self.pose_threshold > 0 or self.phase_obs  # reference advanced, restarting at frame 0
@@ -349,7 +352,17 @@ class CgailDeviceEnv:
         cmd = rows.pick(self.cmd)
         # (n, T); padding repeats frames
         each = pose_key_error_frames(pose_keys(rows.pick(obs)), self.ref_keys_t[cmd], self.root_scale)
-        closest, best = each.min(dim=1)
+        if self.goal_window <= 0:
+            closest, best = each.min(dim=1)
+            return rows.put(timed, closest), rows.put(ref, self.ref_obs[cmd, best])
+        # reward.goal_reference_window: the reference moves on from the matched frame
+        synced = rows.pick(self.ref_active & (self.ref_grace == 0))
+        advanced = rows.pick(self.ref_frame)
+        best = goal_reference_frame(
+            each, advanced, self.clip_loops[cmd], self.clip_frames[cmd], self.goal_window, synced
+        )
+        self.ref_frame = rows.put(self.ref_frame, best)
+        closest = each.gather(1, best[:, None])[:, 0]
         return rows.put(timed, closest), rows.put(ref, self.ref_obs[cmd, best])
 
     def _restart_reference_after_ramp(self) -> None:

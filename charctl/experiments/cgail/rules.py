@@ -99,6 +99,28 @@ def pose_key_error_frames(keys: Array, frames: Array, root_scale: float = 1.0) -
     return xp.maximum(ee, root_scale * xp.abs(keys[:, :1] - frames[:, 0]))
 
 
+def goal_reference_frame(
+    each: Array, advanced: Array, loops: Array, clip_frames: Array, window: int, synced: Array
+) -> Array:
+    """(n,) the clip frame each heading-goal row is scored against (reward.goal_reference_window).
+
+    `each` (n, T) m the pose error of each row against every frame of its clip (columns past a clip's length
+    repeat frames); `advanced` (n,) the row's reference frame after this step's `advance_reference`;
+    `loops`, `clip_frames` (n,) its clip's; `synced` (n,) bool its reference is checked (running, out of its
+    grace steps). `window` 0: the closest frame of the whole clip (a walk may stay on a few frames: a
+    shuffle). `window` w > 0, where `synced`: the closest of the w frames from `advanced` on (cyclic over a
+    looping clip's period, T - 1 frames), so the reference moves on by 1 to w frames per control step and the
+    whole gait cycle is asked for; elsewhere (grace steps, ramps) the whole clip, which re-synchronises it."""
+    xp = namespace(each, advanced)
+    if window <= 0:
+        return xp.argmin(each, axis=1)
+    period = xp.where(loops, xp.clip(clip_frames - 1, min=1), clip_frames)[:, None]
+    t = xp.arange(each.shape[1], device=device_of(each))[None, :]
+    offset = (t - advanced[:, None]) % period
+    allowed = ((offset < window) & (t < period)) | ~synced[:, None]
+    return xp.argmin(xp.where(allowed, each, xp.full_like(each, math.inf)), axis=1)
+
+
 def reference_pose_error(obs: Array, ref: Array, root_scale: float = 1.0) -> Array:
     """(N,) m: the largest distance between simulated and reference disc observations (N, 133) over the
     four end effectors (hands and feet, relative to the root in the heading frame) and the root height

@@ -66,6 +66,7 @@ class CgailLearner(AgentCounters):
             pose_error_grace_steps=cfg.reward.pose_error_grace_steps,
             root_height_threshold=cfg.reward.root_height_threshold,
             yaw_error_threshold=cfg.reward.yaw_error_threshold,
+            goal_reference_window=cfg.reward.goal_reference_window,
             reference_reward=cfg.reward.w_track > 0,
         )
         if self.backend in ("warp", "torch"):
