@@ -310,6 +310,12 @@ def smoke_argv(cmd: DocCommand, runs, cwd: Path) -> list[str]:
         runs(target)  # the latest run of the experiment under <work>/outputs must exist
     if command == "eval" and "-k" not in out and any(k in " ".join(out) for k in ("/cgail", "/srb", " srb", " cgail")):
         out += ["-k", "1"]
+    if (
+        command == "eval"
+        and any(t.startswith(str(REPO / "pretrained")) for t in out)
+        and not {"-o", "--out"} & set(out)
+    ):
+        out += ["-o", str(cwd / "eval-out")]  # never write into a committed folder's eval/
     return out
 
 
@@ -366,6 +372,17 @@ def test_smoke_argv_substitutions(tmp_path):
         f"train.total_samples={samples + 1}",
     ]
     assert (tmp_path / committed.name / "config.yaml").read_text() == (committed / "config.yaml").read_text()
+    cmd = DocCommand("x.md", 1, "charctl eval pretrained/tracking-3skill --fidelity -k 4")  # a committed folder
+    argv = smoke_argv(cmd, runs, tmp_path)
+    assert argv == [
+        "eval",
+        str(REPO / "pretrained/tracking-3skill"),
+        "--fidelity",
+        "-k",
+        "1",
+        "-o",
+        str(tmp_path / "eval-out"),
+    ]
     cmd = DocCommand("README.md", 1, "charctl train com-cnn -m data.history=45,90 model.kernel=2,5")
     assert smoke_argv(cmd, runs, tmp_path)[-2:] == ["scale=smoke", f"output_root={tmp_path / 'outputs'}"]
     line = 'charctl export RUN --commands "a:0,b:3"   # a # comment'
