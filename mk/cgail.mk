@@ -95,13 +95,15 @@ repro-cgail-flight: install ## cgail: the recipe plus reward.root_height_thresho
 	$(CHARCTL) train cgail "use_skills=[walk,run,jump]" reward.root_height_threshold=0.15 train.total_samples=25000000 train.checkpoint_every=20 train.keep_checkpoint_every=2500000 seed=1 output_root=$(CGAIL_FID)/flight
 	F=$$(ls -d $(CGAIL_FID)/flight/cgail/*/ | tail -1); $(CHARCTL) eval $$F --fidelity -k 4 && $(CHARCTL) eval $$F --survival 5 -k 32 && $(CHARCTL) eval $$F --dtw -k 8
 
-# Walk with a moving reference (docs/cgail.md, "Walk: a reference that moves on"): the flight experiment plus
-# reward.goal_reference_window=3, so walk and run are scored against a reference that advances 1-3 clip frames per
-# control step from the matched frame instead of the closest frame anywhere (which a shuffle passes).
-.PHONY: repro-cgail-walk-window
-repro-cgail-walk-window: install ## cgail: the flight experiment plus reward.goal_reference_window=3 (2.5e7 samples; ~50 min on 2 cores), evaluated
-	$(CHARCTL) train cgail "use_skills=[walk,run,jump]" reward.root_height_threshold=0.15 reward.goal_reference_window=3 train.total_samples=25000000 train.checkpoint_every=20 train.keep_checkpoint_every=2500000 seed=1 output_root=$(CGAIL_FID)/walkwin
-	F=$$(ls -d $(CGAIL_FID)/walkwin/cgail/*/ | tail -1); $(CHARCTL) eval $$F --fidelity -k 4 && $(CHARCTL) eval $$F --survival 5 -k 32 && $(CHARCTL) eval $$F --dtw -k 8
+# Ten skills with a moving walk reference (docs/cgail.md, "Walk: a reference that moves on"): the radii run's command
+# plus reward.goal_reference_window=3, so walk and run are scored against a reference that advances 1-3 clip frames
+# per control step from the matched frame instead of the closest frame anywhere (which the radii run's shuffle passes).
+# Started 2026-12-03 22:05; continued with --resume from pretrained/in-progress/ (~5 h on 2 cores in all).
+.PHONY: repro-cgail-10skill-window
+repro-cgail-10skill-window: install ## cgail: ten skills, both radii plus reward.goal_reference_window=3 (1.5e8 samples; ~5 h on 2 cores, resumable), evaluated
+	$(CHARCTL) train cgail "use_skills=[]" reward.root_height_threshold=0.15 reward.yaw_error_threshold=1.5 reward.goal_reference_window=3 train.fidelity_every=2000000 train.total_samples=150000000 train.checkpoint_every=20 train.keep_checkpoint_every=2500000 seed=1 output_root=$(CGAIL_FID)/window
+	T=$$(ls -d $(CGAIL_FID)/window/cgail/*/ | tail -1); \
+	$(CHARCTL) eval $$T --fidelity -k 4 && $(CHARCTL) eval $$T --survival 5 -k 32 && $(CHARCTL) eval $$T --dtw --confusion --switch walk right_kick -k 8
 
 # Ten skills with both radii (docs/cgail.md, "Ten skills with a root-height and a heading radius"): the flight experiment's
 # root-height radius plus reward.yaw_error_threshold=1.5 (the spins must turn), run H's recipe otherwise. Started
