@@ -18,7 +18,8 @@ references, imported only when called:
 the config names (an unknown clip, a database with too few searchable frames). `charctl train` calls it on
 every composed job (all of a `-m` sweep's) before the first run directory is made, and on a `--resume` run's
 config before anything is written there. It reads, never writes, and is cheap (what it loads, `train` loads
-again); a problem only the training itself finds stays `train`'s.
+again: 0.011 s for cgail's ten clips, so `train` keeps its signature rather than take preflight's products); a
+problem only the training itself finds stays `train`'s.
 
 `eval_options` / `export_options` declare the command-line options the experiment adds to
 `charctl eval` / `charctl export`; the CLI builds each experiment's option set from them.
