@@ -254,3 +254,44 @@ def test_checked_tracking_reward_by_hand(arr):
     obs[1, 0] = 0.1
     out = rules.checked_tracking_reward(arr(obs), arr(scored), arr([True, True, False]))
     np.testing.assert_allclose(_np(out), [1.0, 0.9 + 0.1 * math.exp(-0.1), 0.0], atol=1e-12)
+
+
+@pytest.mark.parametrize("arr", LIBS)
+def test_reference_check_by_hand(arr):
+    """Five envs, pose threshold 0.5 m, heading radius 1.5 rad (1/3 m per rad), dt 0.1 s, the timed reference
+    spinning at 5 rad/s. Env 0 stands still, 1.2 rad already missed: -1.7 rad -> 0.567 m > 0.5, ended; it
+    matches the pose it was scored against: r_track 1. Env 1 spins with the reference (0.2 rad stay) and is
+    0.1 m higher at the root than its scored pose: 0.3 m runs on, r_track 0.9 + 0.1 exp(-0.1). Env 2 is in
+    grace steps: unchecked (0.9 m ends nothing, r_track 0), heading error restarts at 0. Env 3 fell: unchecked,
+    but its heading error adds up (-1.7). Env 4 walks (a heading goal): heading not counted (0), scored
+    against a closest frame equal to its pose (r_track 1) although its timed reference is 1 m off. Without
+    the radius and reward.w_track: the errors as given (nothing ended), yaw_err and r_track handed back."""
+    obs = np.zeros((5, 133))
+    obs[1, rules.OBS_YAW_RATE] = 5.0
+    obs[1, 0] = 0.1
+    scored = obs.copy()
+    scored[1, 0] = 0.0
+    ref = np.zeros((5, 133))
+    ref[:, rules.OBS_YAW_RATE] = 5.0
+    ref[4, 0] = 1.0
+    err = np.array([0.1, 0.3, 0.9, 0.1, 0.2])
+    yaw_err = np.array([-1.2, 0.2, -1.2, -1.2, -1.2])
+    active = np.ones(5, dtype=bool)
+    grace = np.array([0, 0, 3, 0, 0])
+    goal = np.array([False, False, False, False, True])
+    fell = np.array([False, False, False, True, False])
+    unstable = np.zeros(5, dtype=bool)
+    given = np.full(5, 0.7)  # r_track so far (the tracking baseline's)
+    args = [arr(x) for x in (err, scored, obs, ref, given, yaw_err, active, grace, goal, fell, unstable)]
+    r, ended, checked, new_yaw = rules.reference_check(
+        *args, threshold=0.5, yaw_error_scale=0.5 / 1.5, dt=0.1, reference_reward=True
+    )
+    assert _np(checked).tolist() == [True, True, False, False, True]
+    assert _np(ended).tolist() == [True, False, False, False, False]
+    np.testing.assert_allclose(_np(new_yaw), [-1.7, 0.2, 0.0, -1.7, 0.0], atol=1e-12)
+    np.testing.assert_allclose(_np(r), [1.0, 0.9 + 0.1 * math.exp(-0.1), 0.0, 0.0, 1.0], atol=1e-12)
+    r, ended, checked, new_yaw = rules.reference_check(
+        *args, threshold=0.5, yaw_error_scale=0.0, dt=0.1, reference_reward=False
+    )
+    assert _np(checked).tolist() == [True, True, False, False, True] and not _np(ended).any()
+    assert _np(new_yaw).tolist() == yaw_err.tolist() and _np(r).tolist() == given.tolist()

@@ -29,19 +29,17 @@ from charctl.experiments.cgail.features import (
     sim_kinematics,
 )
 from charctl.experiments.cgail.rules import (
-    add_yaw_error,
     advance_ramp,
     advance_reference,
-    checked_tracking_reward,
     count_down_grace,
     episode_end,
     goal_features,
     goal_reference_frame,
     goal_reward,
     phase_features,
-    pose_check,
     pose_key_error,
     pose_keys,
+    reference_check,
     reference_pose_error,
     restart_after_ramp,
     root_height_scale,
@@ -303,21 +301,23 @@ class CgailEnv:
         pose_ended = np.zeros(self.N, dtype=bool)
         if self.pose_threshold > 0:
             err, scored = self._pose_error(pair_next, ref)
-            if self.yaw_scale > 0:  # reward.yaw_error_threshold: the heading gained on the reference
-                err, self.yaw_err = add_yaw_error(
-                    err,
-                    self.yaw_err,
-                    pair_next,
-                    ref,
-                    self.ref_active,
-                    self.ref_grace,
-                    self.has_goal[self.cmd],
-                    1.0 / self.cfg.control_hz,
-                    self.yaw_scale,
-                )
-            checked, pose_ended = pose_check(self.ref_active, self.ref_grace, fell, unstable, err, self.pose_threshold)
-            if self.reference_reward:  # reward.w_track: the tracking reward where the reference is checked
-                r_track = checked_tracking_reward(pair_next, scored, checked)
+            r_track, pose_ended, _, self.yaw_err = reference_check(
+                err,
+                scored,
+                pair_next,
+                ref,
+                r_track,
+                self.yaw_err,
+                self.ref_active,
+                self.ref_grace,
+                self.has_goal[self.cmd],
+                fell,
+                unstable,
+                threshold=self.pose_threshold,
+                yaw_error_scale=self.yaw_scale,
+                dt=1.0 / self.cfg.control_hz,
+                reference_reward=self.reference_reward,
+            )
         self.steps += 1
         terminated, truncated = episode_end(fell, unstable, pose_ended, self.steps, self.max_steps, clip_ended)
         self.fall_count += int(fell.sum())

@@ -11,8 +11,8 @@ Every per-env quantity is a tensor on the simulation device and every branch tha
 data is a mask (`torch.where`), so a control step issues no host round trip: resets run for a
 (possibly all-false) mask each step, with RSI candidates drawn for every env and written only
 where the mask is set. On the CPU (env.backend=torch, or Warp's CPU device), where reading a mask
-costs nothing, the work for such a subset runs on its rows only (`compact_rows`: the resets and the
-closest-frame search of the pose error, as the numpy env does), with the same random numbers drawn.
+costs nothing, the work for such a subset runs on its rows only (`compact_rows`, `env_rows.py`: the resets and
+the closest-frame search of the pose error, as the numpy env does), with the same random numbers drawn.
 Random numbers come from a torch generator on the device (seeded), so the two backends give equally
 distributed, not identical, episodes.
 
@@ -24,32 +24,24 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-import numpy as np
 import torch
 import torch.nn.functional as F
 
 from charctl.config import plain_section
-from charctl.experiments.cgail.features import (
-    DISC_OBS_DIM,
-    Kinematics,
-    disc_obs,
-    heading_frame,
-    policy_state,
-)
+from charctl.experiments.cgail.env_rows import IndexRows, MaskRows, pad_skill_tables
+from charctl.experiments.cgail.features import DISC_OBS_DIM, Kinematics, disc_obs, heading_frame, policy_state
 from charctl.experiments.cgail.rules import (
-    add_yaw_error,
     advance_ramp,
     advance_reference,
-    checked_tracking_reward,
     count_down_grace,
     episode_end,
     goal_features,
     goal_reference_frame,
     goal_reward,
     phase_features,
-    pose_check,
     pose_key_error_frames,
     pose_keys,
+    reference_check,
     reference_pose_error,
     restart_after_ramp,
     root_height_scale,
@@ -80,56 +72,6 @@ class DeviceStepResult:
     truncated: torch.Tensor  # (N,) bool: time limit or end of a non-looping reference clip
     unstable: torch.Tensor  # (N,) bool: simulator blow-up this step
     pose_ended: torch.Tensor | None = None  # (N,) bool: ended by a large pose error (part of `terminated`)
-
-
-class _MaskRows:
-    """A data-dependent subset of the envs (the envs a reset writes, the envs scored against their closest clip
-    frame) as its (N,) bool mask: values computed for every env and written where the mask is set
-    (`torch.where`), so nothing is read back to the host (the form on a GPU)."""
-
-    def __init__(self, mask: torch.Tensor):
-        self.mask = self.ids = mask
-
-    def pick(self, x: torch.Tensor) -> torch.Tensor:
-        """The rows of per-env `x` the values are computed for: all of them."""
-        return x
-
-    def put(self, old: torch.Tensor, new: torch.Tensor | float | bool) -> torch.Tensor:
-        """`old` with `new` written in the subset's rows (`new` per env, or one value for all)."""
-        if not isinstance(new, torch.Tensor):
-            return torch.where(self.mask, torch.full_like(old, new), old)
-        return torch.where(self.mask.view(-1, *[1] * (new.dim() - 1)), new, old)
-
-
-class _IndexRows:
-    """The same subset as its integer ids (`CgailDeviceEnv.compact_rows`: on the CPU, where reading the mask costs
-    nothing): values computed for those rows only, as the numpy env does, and written into a copy (tensors
-    handed out earlier, e.g. the last step's state, do not change). Every quantity is a row-wise function of its
-    env, so the written values are `_MaskRows`' (up to the last bit of a transcendental function, whose
-    vectorised and scalar kernels may round differently: ~1e-16 rad on a heading)."""
-
-    def __init__(self, mask: torch.Tensor):
-        self.ids = torch.nonzero(mask).squeeze(1)
-
-    def pick(self, x: torch.Tensor) -> torch.Tensor:
-        """The subset's rows of per-env `x`."""
-        return x[self.ids]
-
-    def put(self, old: torch.Tensor, new: torch.Tensor | float | bool) -> torch.Tensor:
-        """A copy of `old` with `new` (per subset row, or one value) written in the subset's rows, in the result
-        dtype `torch.where` would give."""
-        if not isinstance(new, torch.Tensor):
-            return old.clone().index_fill_(0, self.ids, new)
-        out = old.to(torch.result_type(new, old), copy=True)
-        out[self.ids] = new
-        return out
-
-
-def _pad(arrays: list[np.ndarray], device: torch.device, dtype=torch.float32) -> torch.Tensor:
-    """(K, max_len, ...) tensor of per-skill arrays, each padded with its last row."""
-    longest = max(len(a) for a in arrays)
-    out = np.stack([np.concatenate([a, np.repeat(a[-1:], longest - len(a), axis=0)]) for a in arrays])
-    return torch.as_tensor(out, dtype=dtype, device=device)
 
 
 class CgailDeviceEnv:
@@ -223,9 +165,9 @@ class CgailDeviceEnv:
         """Per-skill tables on the device: RSI states and reference observations (padded to the longest clip
         with its last row), clip lengths, looping, heading goals and mean speeds (m/s)."""
         dev, dt = self.device, self.dtype
-        self.rsi_qpos = _pad([s.qpos for s in skills], dev, dt)  # (K, T, nq)
-        self.rsi_qvel = _pad([s.qvel for s in skills], dev, dt)  # (K, T, nv)
-        self.ref_obs = _pad([s.obs for s in skills], dev, dt)  # (K, T, 133)
+        self.rsi_qpos = pad_skill_tables([s.qpos for s in skills], dev, dt)  # (K, T, nq)
+        self.rsi_qvel = pad_skill_tables([s.qvel for s in skills], dev, dt)  # (K, T, nv)
+        self.ref_obs = pad_skill_tables([s.obs for s in skills], dev, dt)  # (K, T, 133)
         self.ref_keys = pose_keys(self.ref_obs)  # (K, T, 13): what the pose error compares
         self.ref_keys_t = self.ref_keys.transpose(1, 2).contiguous()  # (K, 13, T): frames last (closest-frame search)
         self.clip_frames = torch.as_tensor([len(s.obs) for s in skills], dtype=torch.long, device=dev)
@@ -292,7 +234,7 @@ class CgailDeviceEnv:
             else torch.zeros(self.N, dtype=self.dtype, device=self.device)
         )
         goal_u = self._rand()  # the heading goals' draw
-        rows = _IndexRows(mask) if self.compact_rows else _MaskRows(mask)
+        rows = IndexRows(mask) if self.compact_rows else MaskRows(mask)
         if self.compact_rows and rows.ids.numel() == 0:
             return  # nothing to write (the mask form writes every row's old value back)
         skill, frames = rows.pick(skill), rows.pick(frames)
@@ -313,7 +255,7 @@ class CgailDeviceEnv:
         self.ref_active = rows.put(self.ref_active, True)
         self.ref_grace = rows.put(self.ref_grace, 0)
         self.yaw_err = rows.put(self.yaw_err, 0.0)
-        k = sim_kinematics(self.sim, None if isinstance(rows, _MaskRows) else rows.ids)
+        k = sim_kinematics(self.sim, None if isinstance(rows, MaskRows) else rows.ids)
         self.goal_angle = rows.put(self.goal_angle, self._goal(k.body_rot[:, 0], rows.pick(goal_u)))
         state, obs = self._features(k, rows.pick)
         self._state = rows.put(self._state, state.float())
@@ -348,7 +290,7 @@ class CgailDeviceEnv:
         a heading goal, against their clip's closest frame (every env is scored both ways; a mask picks)."""
         timed = reference_pose_error(obs, ref, self.root_scale)
         goal = self.has_goal[self.cmd]
-        rows = _IndexRows(goal) if self.compact_rows else _MaskRows(goal)
+        rows = IndexRows(goal) if self.compact_rows else MaskRows(goal)
         cmd = rows.pick(self.cmd)
         # (n, T); padding repeats frames
         each = pose_key_error_frames(pose_keys(rows.pick(obs)), self.ref_keys_t[cmd], self.root_scale)
@@ -406,21 +348,23 @@ class CgailDeviceEnv:
         pose_ended = no_pose_end
         if self.pose_threshold > 0:
             err, scored = self._pose_error(pair_next, ref)
-            if self.yaw_scale > 0:  # reward.yaw_error_threshold: the heading gained on the reference
-                err, self.yaw_err = add_yaw_error(
-                    err,
-                    self.yaw_err,
-                    pair_next,
-                    ref,
-                    self.ref_active,
-                    self.ref_grace,
-                    self.has_goal[self.cmd],
-                    1.0 / self.cfg.control_hz,
-                    self.yaw_scale,
-                )
-            checked, pose_ended = pose_check(self.ref_active, self.ref_grace, fell, unstable, err, self.pose_threshold)
-            if self.reference_reward:  # reward.w_track: the tracking reward where the reference is checked
-                r_track = checked_tracking_reward(pair_next, scored, checked)
+            r_track, pose_ended, _, self.yaw_err = reference_check(
+                err,
+                scored,
+                pair_next,
+                ref,
+                r_track,
+                self.yaw_err,
+                self.ref_active,
+                self.ref_grace,
+                self.has_goal[self.cmd],
+                fell,
+                unstable,
+                threshold=self.pose_threshold,
+                yaw_error_scale=self.yaw_scale,
+                dt=1.0 / self.cfg.control_hz,
+                reference_reward=self.reference_reward,
+            )
         self.steps = self.steps + 1
         terminated, truncated = episode_end(fell, unstable, pose_ended, self.steps, self.max_steps, clip_ended)
         self._falls += fell.sum()

@@ -3,9 +3,9 @@
 Pure functions of batched arrays (leading dim N): the heading-goal and clip-phase parts of the policy
 state, the DeepMimic-style tracking reward, the reference pose error, the heading-goal reward, the
 episode ends, and the per-env bookkeeping (command switches and the ramp weight, the timed reference's
-restart and grace steps, the pose-error check). `env.CgailEnv` calls them with numpy arrays,
-`env_torch.CgailDeviceEnv` and the web graph with torch tensors (`charctl.motion.array_compat`), so a
-rule change is one edit.
+restart and grace steps, the pose-error check and its reward, `reference_check`). `env.CgailEnv` calls
+them with numpy arrays, `env_torch.CgailDeviceEnv` and the web graph with torch tensors
+(`charctl.motion.array_compat`), so a rule change is one edit.
 
 Frames and units (docs/cgail.md): the disc observation o (133) is in the heading frame (+x facing, y up,
 +z right), metres, m/s, radians; yaw angles are about world +y.
@@ -331,3 +331,40 @@ def checked_tracking_reward(obs: Array, scored: Array, checked: Array) -> Array:
     xp = namespace(obs, scored)
     r = tracking_reward(obs, scored)
     return xp.where(checked, r, xp.zeros_like(r))
+
+
+def reference_check(
+    err: Array,
+    scored: Array,
+    obs: Array,
+    ref: Array,
+    r_track: Array,
+    yaw_err: Array,
+    ref_active: Array,
+    ref_grace: Array,
+    has_goal: Array,
+    fell: Array,
+    unstable: Array,
+    *,
+    threshold: float,
+    yaw_error_scale: float,
+    dt: float,
+    reference_reward: bool,
+) -> tuple[Array, Array, Array, Array]:
+    """One control step's check against the timed reference (reward.pose_error_threshold `threshold` m > 0):
+    (r_track, pose_ended, checked, yaw_err), all (N,), what both envs' `step` apply.
+
+    `err` (N,) m the pose error and `scored` (N, 133) the reference observations it was measured against (the
+    env's `_pose_error`: the timed reference `ref` (N, 133), or for heading-goal skills their clip's closest
+    frame); `obs` (N, 133) the disc observations after the step. With `yaw_error_scale` > 0 (m/rad, `yaw_scale`)
+    the heading gained on `ref` over `dt` s joins the error (`add_yaw_error`; `yaw_err` (N,) rad comes back
+    updated, else unchanged). `pose_check` then gives `checked` (reference running, out of grace, no fall
+    `fell` or blow-up `unstable`) and `pose_ended` (checked and err > threshold). With `reference_reward`
+    (reward.w_track) r_track is `checked_tracking_reward` against `scored` (in [0, 1], 0 where unchecked);
+    without it the `r_track` passed in (the tracking baseline's, or zeros) comes back."""
+    if yaw_error_scale > 0:  # reward.yaw_error_threshold: the heading gained on the reference
+        err, yaw_err = add_yaw_error(err, yaw_err, obs, ref, ref_active, ref_grace, has_goal, dt, yaw_error_scale)
+    checked, pose_ended = pose_check(ref_active, ref_grace, fell, unstable, err, threshold)
+    if reference_reward:  # reward.w_track: the tracking reward where the reference is checked
+        r_track = checked_tracking_reward(obs, scored, checked)
+    return r_track, pose_ended, checked, yaw_err
