@@ -292,7 +292,8 @@ def test_searchable_frames_are_counted_without_building_the_database():
     """check_searchable (the sweep's check before it writes) counts what build_database would search, and
     gives build_database's one-line error for fewer than 2 frames."""
     from charctl.experiments.motion_matching.cases import with_case
-    from charctl.experiments.motion_matching.database import build_database, check_searchable
+    from charctl.experiments.motion_matching.database import build_database
+    from charctl.experiments.motion_matching.prechecks import check_searchable
     from charctl.experiments.motion_matching.sources import load_sources
 
     cfg = smoke_cfg("data.clips=[kick]", "data.mirror=false", "runtime.end_buffer=140")
@@ -323,12 +324,8 @@ def test_exclusion_window_holding_every_searchable_frame_is_found_before_the_sea
     are inside a window of k frames iff 94 - k < p < k: none for k = 47, frame 47 for k = 48, frames 45..49
     for k = 50 (runtime.exclude_window = 4k paper frames). check_exclusion gives the error that search gives
     from such a frame, and search from the frame next to it finds frame 94, the one frame k away."""
-    from charctl.experiments.motion_matching.database import (
-        blocked_frames,
-        build_database,
-        check_exclusion,
-        check_searchable,
-    )
+    from charctl.experiments.motion_matching.database import build_database
+    from charctl.experiments.motion_matching.prechecks import blocked_frames, check_exclusion, check_searchable
     from charctl.experiments.motion_matching.search import make_index, search
 
     sources = [_straight_source(0.0)]
@@ -360,7 +357,8 @@ def test_exclusion_window_holding_every_searchable_frame_is_found_before_the_sea
 def test_blocked_frames_are_the_frames_the_search_finds_nothing_from(overrides):
     """blocked_frames (the farthest searchable frame decides) == every frame from the first searchable one to
     the clip's end whose window (Database.excluded, the search's rule) holds every searchable frame."""
-    from charctl.experiments.motion_matching.database import blocked_frames, build_database, paper_frames
+    from charctl.experiments.motion_matching.database import build_database, paper_frames
+    from charctl.experiments.motion_matching.prechecks import blocked_frames
     from charctl.experiments.motion_matching.sources import load_sources
 
     cfg = smoke_cfg("data.mirror=false", *overrides)

@@ -24,6 +24,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from charctl.errors import CharctlError
+from charctl.experiments.motion_matching.exclusion import in_window
 from charctl.experiments.motion_matching.sources import (
     SkeletonInfo,
     SourceMotion,
@@ -109,17 +110,6 @@ class Database:
         )
 
 
-def in_window(clip, phase, period, cur_clip, cur_phase, window) -> np.ndarray:
-    """The exclusion rule (paper §3): True for the frames of clip `clip` at `phase` (frames; circular within
-    `period` for an unrolled loop, 0 = not a loop) that a search made from the current frame (`cur_clip`,
-    `cur_phase`) skips: same clip and phase distance < `window` (database frames; 0 skips nothing). Arguments
-    broadcast. Database.excluded, search.RowInfo.excluded and the pre-checks use it; the bbox kernel
-    (_bbox_numba.py) is its compiled copy."""
-    d = np.abs(np.asarray(phase, dtype=float) - cur_phase)
-    d = np.where(np.asarray(period) > 0, np.minimum(d, period - d), d)
-    return (np.asarray(clip) == cur_clip) & (d < window)
-
-
 def paper_frames(n: float, cfg) -> int:
     """A frame count given at frame_unit_hz (the paper's 120 Hz) in database frames."""
     return int(round(n * cfg.data.fps / cfg.frame_unit_hz))
@@ -148,7 +138,7 @@ def build_database(cfg, sources: list[SourceMotion] | None = None, info: Skeleto
     starts = stops - lengths
     searchable = cat.pop("searchable")
     search_rows = np.flatnonzero(searchable & cat["valid"])
-    _require_searchable(search_rows.size)
+    require_searchable(search_rows.size)
     block_names, block_dims = zip(*per_clip[0]["blocks"])
     raw = cat.pop("raw")
     layout = _layout(raw[search_rows], block_names, block_dims, cfg, fut, past)
@@ -175,95 +165,16 @@ def build_database(cfg, sources: list[SourceMotion] | None = None, info: Skeleto
         valid=cat["valid"],
         search_rows=search_rows,
         layout=layout,
-        exclude_window=_window(cfg),
+        exclude_window=exclude_window_frames(cfg),
     )
 
 
-def check_searchable(cfg, sources: list[SourceMotion]) -> int:
-    """The number of searchable frames build_database(cfg, sources) would have, counted without computing
-    any feature (so a sweep can check every case before it writes); fewer than 2 is build_database's
-    one-line error."""
-    count = sum(int(np.count_nonzero(rows)) for rows, _ in _search_frames(cfg, sources))
-    _require_searchable(count)
-    return count
-
-
-def check_exclusion(cfg, sources: list[SourceMotion]) -> None:
-    """A one-line error (the one `search` gives when it finds nothing) if `runtime.exclude_window` can
-    exclude every searchable frame of build_database(cfg, sources) from a search, found without computing
-    any feature (so eval and export check it before they write); see `blocked_frames`."""
-    per_clip = _search_frames(cfg, sources)
-    count = sum(int(np.count_nonzero(rows)) for rows, _ in per_clip)
-    for s, frames in zip(sources, _blocked(per_clip, [s.period for s in sources], _window(cfg))):
-        if frames.size:
-            raise exclusion_error(s.name, int(frames[0]), count, _window(cfg))
-
-
-def blocked_frames(cfg, sources: list[SourceMotion]) -> list[np.ndarray]:
-    """Per source, the frames (indices into the clip) a search can be made from with every searchable frame
-    of build_database(cfg, sources) inside their exclusion window (`in_window`): a search from one of them
-    finds nothing.
-
-    Conservative where only the rollout knows: which frames are current when a search is made depends on
-    the search results (the start frame is the best match to the path, playback runs on from each jump for
-    runtime.search_interval frames or, with runtime.continue_if_best, further), so every frame that can be
-    current is counted: from the clip's first searchable frame (a start or jump target) to its last.
-    Exact otherwise: another clip's frames are never excluded, so only a database whose searchable frames
-    all lie in one clip can have blocked frames; from a current phase p the searchable frame farthest away
-    decides (it is inside the window only if all are): the first or last searchable phase of a clip that is
-    not a loop, a neighbour of the antipode p + period/2 of a loop."""
-    return _blocked(_search_frames(cfg, sources), [s.period for s in sources], _window(cfg))
-
-
-def _blocked(per_clip: list[tuple[np.ndarray, np.ndarray]], periods: list[float], window: int) -> list[np.ndarray]:
-    """`blocked_frames` from `_search_frames`' masks and phases, the clips' periods and the window."""
-    out = [np.zeros(0, dtype=int) for _ in per_clip]
-    holding = [i for i, (rows, _) in enumerate(per_clip) if rows.any()]
-    if window <= 0 or len(holding) != 1:
-        return out
-    i = holding[0]
-    rows, phase = per_clip[i]
-    period = float(periods[i])
-    x = np.sort(phase[rows])
-    cur = np.arange(int(np.argmax(rows)), rows.size)
-    p = phase[cur]
-    if period > 0:
-        j = np.searchsorted(x, np.mod(p + period / 2, period))
-        far = np.stack([x[j % x.size], x[(j - 1) % x.size]])
-    else:
-        far = np.stack([np.full(p.shape, x[0]), np.full(p.shape, x[-1])])
-    out[i] = cur[in_window(0, far, period, 0, p, window).all(axis=0)]
-    return out
-
-
-def exclusion_error(clip: str, frame: int, searchable: int, window: int) -> CharctlError:
-    """The one-line error of a search (from frame `frame` of clip `clip`) that finds every one of the
-    database's `searchable` frames inside its exclusion window of `window` database frames."""
-    return CharctlError(
-        f"runtime.exclude_window excludes every searchable frame from a search at frame {frame} of clip "
-        f"{clip!r}: all {searchable} are in that clip, closer than {window} frames (at data.fps) in phase; "
-        "lower runtime.exclude_window or add clips"
-    )
-
-
-def _window(cfg) -> int:
+def exclude_window_frames(cfg) -> int:
     """runtime.exclude_window in database frames."""
     return paper_frames(cfg.runtime.exclude_window, cfg)
 
 
-def _search_frames(cfg, sources: list[SourceMotion]) -> list[tuple[np.ndarray, np.ndarray]]:
-    """Per source, which of its frames build_database(cfg, sources) makes searchable (T,) and their phases
-    (T,), without computing any feature."""
-    fut, past = feature_offsets(cfg)
-    out = []
-    for s in sources:
-        t = np.arange(s.root_pos.shape[0])
-        searchable, phase = _searchable_and_phase(s, cfg, t)
-        out.append((searchable & _full_horizon(t, fut, past), phase))
-    return out
-
-
-def _require_searchable(count: int) -> None:
+def require_searchable(count: int) -> None:
     """A database needs at least 2 searchable frames; fewer is a one-line error."""
     if count < 2:
         raise CharctlError(
@@ -286,8 +197,8 @@ def _clip_arrays(s: SourceMotion, info: SkeletonInfo, cfg, fut: np.ndarray, past
     t = np.arange(T)
     step_local, step_heading = _playback_steps(ground, heading, t)
     blocks = _feature_blocks(s, info, cfg, ground, heading, rel_root, t, fut, past)
-    valid = _full_horizon(t, fut, past)
-    searchable, phase = _searchable_and_phase(s, cfg, t)
+    valid = full_horizon(t, fut, past)
+    searchable, phase = searchable_and_phase(s, cfg, t)
     return {
         "ground": ground,
         "heading": heading,
@@ -357,13 +268,13 @@ def _feature_blocks(
     return blocks
 
 
-def _full_horizon(t: np.ndarray, fut: np.ndarray, past: np.ndarray) -> np.ndarray:
+def full_horizon(t: np.ndarray, fut: np.ndarray, past: np.ndarray) -> np.ndarray:
     """True for the frames `t` of a clip (of len(t) frames) whose whole future (`fut`) and past
     (`past`) sample offsets lie inside the clip."""
     return (t + fut.max() <= len(t) - 1) & (t - (past.max() if past.size else 0) >= 0)
 
 
-def _searchable_and_phase(s: SourceMotion, cfg, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def searchable_and_phase(s: SourceMotion, cfg, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Which frames the search may jump to, and each frame's phase (frames; within the period for a
     looping clip, else the frame index, with the last `runtime.end_buffer` frames left out)."""
     T = len(t)

@@ -81,7 +81,7 @@ def check_databases(cfg, cases: list[int], sources: list[SourceMotion]) -> None:
     """Each case's database (built from `sources`) would have at least 2 searchable frames and leave a frame
     outside runtime.exclude_window for every search; the first case that would not is build_database's or
     search's one-line error, given here before anything is built or written."""
-    from charctl.experiments.motion_matching.database import check_exclusion, check_searchable
+    from charctl.experiments.motion_matching.prechecks import check_exclusion, check_searchable
 
     for case in cases:
         ccfg = with_case(cfg, case)

@@ -19,8 +19,9 @@ FPS_USER_SKELETON = "--fps is not supported for a data.bvh_dir skeleton; the BVH
 def export(target: str, options: dict, overrides: list[str]) -> None:
     """Run the config's path (`path=`, `case=`) and write metrics.json, root_path.csv, path.png and
     `--bvh` / `--video` of the generated motion."""
-    from charctl.experiments.motion_matching.database import build_database, check_exclusion
+    from charctl.experiments.motion_matching.database import build_database
     from charctl.experiments.motion_matching.paths import make_path, path_errors
+    from charctl.experiments.motion_matching.prechecks import check_exclusion
     from charctl.experiments.motion_matching.runtime import run_path
     from charctl.experiments.motion_matching.search import make_index
     from charctl.experiments.motion_matching.sources import load_sources

@@ -13,7 +13,7 @@ current frame (same clip, phase distance < k; circular for unrolled loops):
           whose lower bound is below the best cost so far
 
 An index answers (-1, inf) when the window holds every row; `search` makes that the one-line
-database.exclusion_error.
+exclusion.exclusion_error.
 """
 
 from __future__ import annotations
@@ -24,7 +24,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from charctl.experiments.motion_matching.boxes import LARGE_BOX, SMALL_BOX, box_bounds
-from charctl.experiments.motion_matching.database import Database, exclusion_error, in_window
+from charctl.experiments.motion_matching.database import Database
+from charctl.experiments.motion_matching.exclusion import exclusion_error, in_window
 
 
 @dataclass
@@ -155,8 +156,8 @@ def search(db: Database, index, query: np.ndarray, cur: int | None) -> tuple[int
     """The database frame nearest to `query`, skipping the window around frame `cur`.
 
     Returns (frame index into the database, squared distance). A window that holds every searchable frame
-    is database.exclusion_error (eval and export refuse such a config before they start:
-    database.check_exclusion).
+    is exclusion.exclusion_error (eval and export refuse such a config before they start:
+    prechecks.check_exclusion).
     """
     if cur is None or db.exclude_window <= 0:
         row, d2 = index.query(query)

@@ -11,9 +11,9 @@ from charctl.experiments.motion_matching.cases import resolve_case
 
 def preflight(cfg) -> None:
     """`charctl train`'s check before the run directory is made: `train`'s one-line errors about the case, the
-    clips and a database with too few searchable frames (database.check_searchable, no feature computed).
+    clips and a database with too few searchable frames (prechecks.check_searchable, no feature computed).
     Training never searches, so runtime.exclude_window is not checked here (eval and export check it)."""
-    from charctl.experiments.motion_matching.database import check_searchable
+    from charctl.experiments.motion_matching.prechecks import check_searchable
     from charctl.experiments.motion_matching.sources import load_sources
 
     cfg, _ = resolve_case(cfg)
