@@ -105,32 +105,36 @@ class CgailEnv:
         )
         self.N = env_cfg.num_envs
         self.max_steps = int(round(env_cfg.episode_seconds * env_cfg.control_hz))
-        self.cmd = np.zeros(self.N, dtype=np.int64)  # B: current command
-        self.prev_cmd = np.zeros(self.N, dtype=np.int64)  # A: previous command
-        self.w = np.ones(self.N)  # ramp weight
-        self.steps = np.zeros(self.N, dtype=np.int64)
-        self.goal_angle = np.zeros(self.N)  # world yaw of the heading goal (radians about +y)
+        self._per_env_arrays()
         self.forced_command: np.ndarray | None = None  # evaluation: fixed command per env (-1 = random)
         self.start_frame: int | None = None  # evaluation: RSI from this clip frame instead of a random one
         self.random_yaw = True  # RSI turns the character by a random yaw (training); off for evaluation
         self.has_goal = np.array([s.heading_goal for s in skills])
         self.speed = np.array([s.mean_speed for s in skills])
         self.rest = np.zeros(self.sim.layout.nu)
-        self.ref_frame = np.zeros(self.N, dtype=np.int64)  # reference clip frame at the current phase
-        self.ref_active = np.ones(self.N, dtype=bool)  # pose-error check: reference valid (off during a switch)
-        self.ref_grace = np.zeros(self.N, dtype=np.int64)  # pose-error check: steps left without a check
-        self.yaw_err = np.zeros(self.N)  # reward.yaw_error_threshold: heading gained on the reference (rad)
         self.clip_frames = np.array([len(sk.obs) for sk in skills])
         self.clip_loops = np.array([sk.loop for sk in skills])
         self.state_dim = state_dim(tracking or self.phase_obs)
         self.obs_dim = self.state_dim
-        self.episode_return_goal = np.zeros(self.N)
         self.fall_count = 0
         # per-skill recent failure rate: falls and pose-error ends (env.skill_fall_weight)
         self.fall_rate = np.full(self.K, 0.5)
         self._state = np.zeros((self.N, self.state_dim))
         self._obs = np.zeros((self.N, DISC_OBS_DIM))
         self.reset(np.arange(self.N))
+
+    def _per_env_arrays(self) -> None:
+        """The per-env bookkeeping arrays (N,), filled by `reset`."""
+        self.cmd = np.zeros(self.N, dtype=np.int64)  # B: current command
+        self.prev_cmd = np.zeros(self.N, dtype=np.int64)  # A: previous command
+        self.w = np.ones(self.N)  # ramp weight
+        self.steps = np.zeros(self.N, dtype=np.int64)
+        self.goal_angle = np.zeros(self.N)  # world yaw of the heading goal (radians about +y)
+        self.ref_frame = np.zeros(self.N, dtype=np.int64)  # reference clip frame at the current phase
+        self.ref_active = np.ones(self.N, dtype=bool)  # pose-error check: reference valid (off during a switch)
+        self.ref_grace = np.zeros(self.N, dtype=np.int64)  # pose-error check: steps left without a check
+        self.yaw_err = np.zeros(self.N)  # reward.yaw_error_threshold: heading gained on the reference (rad)
+        self.episode_return_goal = np.zeros(self.N)
 
     # ------------------------------------------------------------------ commands
     def command_blend(self) -> np.ndarray:
@@ -334,9 +338,7 @@ class CgailEnv:
             self._restart_reference_after_ramp()
         if done.size:
             self.reset(done)
-        running = np.ones(self.N, dtype=bool)
-        running[done] = False
-        self._maybe_switch(np.flatnonzero(running))
+        self._maybe_switch(np.setdiff1d(np.arange(self.N), done))  # the envs that did not just reset
         return StepResult(
             self._state, self._obs, pair_next, final_state, r_goal, r_track, terminated, truncated, unstable, pose_ended
         )
