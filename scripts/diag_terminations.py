@@ -1,0 +1,123 @@
+"""Why do a cgail policy's episodes end under its training rules? Per skill, ends per 1000 control steps by cause.
+
+    .venv/bin/python scripts/diag_terminations.py RUN [--skills spindance,breakdance] [--envs 32] [--steps 300]
+
+Rolls `--envs` envs per skill, each commanded with the skill (mean actions, training's random start frames and
+headings, no switches), under the run's own training rules (pose threshold and its radii, the goal-reference
+window), and splits every episode end by what ended it:
+
+- `fall`: a non-foot body touched the ground (or the simulation blew up);
+- `effector`: the pose check, a hand or foot farther than the pose threshold from the reference (m, relative to
+  the root in the heading frame); `worst` names the end effector that was farthest at those ends;
+- `root`: the pose check, the root height off by more than reward.root_height_threshold;
+- `heading`: the pose check, neither of those: the heading gained on the timed reference passed
+  reward.yaw_error_threshold;
+- `len`: the mean episode length in control steps of the episodes that ended (the 30-Hz steps from a reset).
+
+The low-style termination (reward.low_style_threshold) is applied by the training rollout, not the env, and is
+not counted here. A diagnostic for the skills the ten-skill runs do not learn (spindance, breakdance), not a target.
+"""
+
+from __future__ import annotations
+
+import argparse
+
+import numpy as np
+
+EFFECTORS = ("R hand", "L hand", "R foot", "L foot")  # the order of rules.pose_keys' four end effectors
+
+
+def measure(run, skill: int, envs: int, steps: int) -> dict[str, float | str]:
+    """The figures of the module docstring for one skill."""
+    import torch
+    from omegaconf import OmegaConf
+
+    from charctl.experiments.cgail.drive import policy_steps
+    from charctl.experiments.cgail.env import CgailEnv
+    from charctl.experiments.cgail.rules import pose_keys
+
+    torch.manual_seed(0)
+    r = run.cfg.reward
+    threshold = float(r.pose_error_threshold)
+    env_cfg = OmegaConf.merge(run.cfg.env, {"num_envs": envs, "switch_prob": 0.0})
+    env = CgailEnv(
+        run.agent.skills,
+        env_cfg,
+        seed=0,
+        conditional=run.agent.conditional,
+        pose_error_threshold=threshold,
+        pose_error_grace_steps=int(r.pose_error_grace_steps),
+        root_height_threshold=float(r.get("root_height_threshold", 0.0)),
+        yaw_error_threshold=float(r.get("yaw_error_threshold", 0.0)),
+        goal_reference_window=int(r.get("goal_reference_window", 0)),
+        reference_reward=True,
+    )
+    seen: dict[str, np.ndarray] = {}
+    pose_error = env._pose_error
+
+    def spy(pair, ref):  # keep what the pose check compared, before the env resets the rows that end
+        err, scored = pose_error(pair, ref)
+        seen["keys"], seen["ref"] = pose_keys(pair), pose_keys(scored)
+        return err, scored
+
+    env._pose_error = spy
+    env.forced_command = np.full(envs, skill)
+    env.reset(np.arange(envs))
+    counts = {"fall": 0, "effector": 0, "root": 0, "heading": 0}
+    worst = np.zeros(len(EFFECTORS), dtype=int)
+    lengths: list[np.ndarray] = []
+    for step in policy_steps(run.agent, env, steps, before_step=lambda t: env.steps.copy()):
+        res = step.result
+        lengths.append(step.before[res.terminated] + 1)
+        counts["fall"] += int((res.terminated & ~res.pose_ended).sum())
+        ended = np.flatnonzero(res.pose_ended)
+        if ended.size:
+            d = (seen["keys"][ended, 1:] - seen["ref"][ended, 1:]).reshape(-1, 4, 3)
+            dist = np.linalg.norm(d, axis=-1)  # (n, 4) m
+            root = np.abs(seen["keys"][ended, 0] - seen["ref"][ended, 0]) * env.root_scale
+            by_effector = dist.max(axis=1) > threshold
+            by_root = ~by_effector & (root > threshold)
+            counts["effector"] += int(by_effector.sum())
+            counts["root"] += int(by_root.sum())
+            counts["heading"] += int((~by_effector & ~by_root).sum())
+            np.add.at(worst, dist[by_effector].argmax(axis=1), 1)
+    per_1k = {k: 1000.0 * v / (envs * steps) for k, v in counts.items()}
+    ended_lengths = np.concatenate(lengths)
+    return {
+        **per_1k,
+        "worst": EFFECTORS[int(worst.argmax())] if worst.any() else "-",
+        "len": float(ended_lengths.mean()) if ended_lengths.size else float("nan"),
+    }
+
+
+def main() -> None:
+    from charctl.experiments.cgail.rollouts import load_eval_run
+
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("run")
+    ap.add_argument("--skills", default="", help="comma-separated skills (default: all of the run's)")
+    ap.add_argument("--envs", type=int, default=32)
+    ap.add_argument("--steps", type=int, default=300, help="control steps (30 Hz)")
+    args = ap.parse_args()
+    if args.envs < 1 or args.steps < 1:
+        raise SystemExit("error: --envs and --steps must be >= 1")
+    run = load_eval_run(args.run, device="cpu")
+    names = [s.name for s in run.agent.skills]
+    wanted = [s for s in args.skills.split(",") if s] or names
+    unknown = [s for s in wanted if s not in names]
+    if unknown:
+        raise SystemExit(f"error: {', '.join(unknown)} not among this run's skills ({', '.join(names)})")
+    if float(run.cfg.reward.pose_error_threshold) <= 0:
+        raise SystemExit("error: this run has no pose check (reward.pose_error_threshold is 0)")
+    print(f"{args.run}: {args.envs} envs x {args.steps} steps per skill; ends per 1000 steps")
+    print(f"{'skill':12s} {'fall':>6s} {'effector':>9s} {'root':>6s} {'heading':>8s} {'worst':>7s} {'len':>6s}")
+    for name in wanted:
+        m = measure(run, names.index(name), args.envs, args.steps)
+        print(
+            f"{name:12s} {m['fall']:6.1f} {m['effector']:9.1f} {m['root']:6.1f} {m['heading']:8.1f} "
+            f"{m['worst']:>7s} {m['len']:6.1f}"
+        )
+
+
+if __name__ == "__main__":
+    main()
