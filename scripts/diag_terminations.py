@@ -12,7 +12,9 @@ window), and splits every episode end by what ended it:
 - `root`: the pose check, the root height off by more than reward.root_height_threshold;
 - `heading`: the pose check, neither of those: the heading gained on the timed reference passed
   reward.yaw_error_threshold;
-- `len`: the mean episode length in control steps of the episodes that ended (the 30-Hz steps from a reset).
+- `len`: the mean episode length in control steps of the episodes that ended (the 30-Hz steps from a reset);
+- `where`: the 5 reference frames (of the timed reference: the clip frame the env scores against) in which a
+  step most often ended by the pose check, and that share of the steps taken there.
 
 The low-style termination (reward.low_style_threshold) is applied by the training rollout, not the env, and is
 not counted here. A diagnostic for the skills the ten-skill runs do not learn (spindance, breakdance), not a target.
@@ -24,7 +26,7 @@ import argparse
 
 import numpy as np
 
-EFFECTORS = ("R hand", "L hand", "R foot", "L foot")  # the order of rules.pose_keys' four end effectors
+EFFECTORS = ("R foot", "L foot", "R hand", "L hand")  # rules.pose_keys' order (skeleton.END_EFFECTORS: ankles, wrists)
 
 
 def measure(run, skill: int, envs: int, steps: int) -> dict[str, float | str]:
@@ -66,9 +68,14 @@ def measure(run, skill: int, envs: int, steps: int) -> dict[str, float | str]:
     counts = {"fall": 0, "effector": 0, "root": 0, "heading": 0}
     worst = np.zeros(len(EFFECTORS), dtype=int)
     lengths: list[np.ndarray] = []
-    for step in policy_steps(run.agent, env, steps, before_step=lambda t: env.steps.copy()):
+    frames = int(env.clip_frames[skill])
+    visits, pose_ends = np.zeros(frames, dtype=int), np.zeros(frames, dtype=int)
+    for step in policy_steps(run.agent, env, steps, before_step=lambda t: (env.steps.copy(), env.ref_frame.copy())):
         res = step.result
-        lengths.append(step.before[res.terminated] + 1)
+        steps_before, frame = step.before
+        lengths.append(steps_before[res.terminated] + 1)
+        np.add.at(visits, frame, 1)
+        np.add.at(pose_ends, frame[res.pose_ended], 1)
         counts["fall"] += int((res.terminated & ~res.pose_ended).sum())
         ended = np.flatnonzero(res.pose_ended)
         if ended.size:
@@ -84,10 +91,22 @@ def measure(run, skill: int, envs: int, steps: int) -> dict[str, float | str]:
     per_1k = {k: 1000.0 * v / (envs * steps) for k, v in counts.items()}
     ended_lengths = np.concatenate(lengths)
     return {
+        "where": _worst_frames(visits, pose_ends),
         **per_1k,
         "worst": EFFECTORS[int(worst.argmax())] if worst.any() else "-",
         "len": float(ended_lengths.mean()) if ended_lengths.size else float("nan"),
     }
+
+
+def _worst_frames(visits: np.ndarray, ends: np.ndarray, width: int = 5) -> str:
+    """'a-b (share)': the `width` consecutive frames with the highest share of visited steps that ended there."""
+    if not ends.any():
+        return "-"
+    kernel = np.ones(width, dtype=int)
+    v, e = np.convolve(visits, kernel, "valid"), np.convolve(ends, kernel, "valid")
+    share = e / np.maximum(v, 1)
+    a = int(share.argmax())
+    return f"{a}-{a + width - 1} ({share[a]:.2f})"
 
 
 def main() -> None:
@@ -110,12 +129,12 @@ def main() -> None:
     if float(run.cfg.reward.pose_error_threshold) <= 0:
         raise SystemExit("error: this run has no pose check (reward.pose_error_threshold is 0)")
     print(f"{args.run}: {args.envs} envs x {args.steps} steps per skill; ends per 1000 steps")
-    print(f"{'skill':12s} {'fall':>6s} {'effector':>9s} {'root':>6s} {'heading':>8s} {'worst':>7s} {'len':>6s}")
+    print(f"{'skill':12s} {'fall':>6s} {'effector':>9s} {'root':>6s} {'heading':>8s} {'worst':>7s} {'len':>6s}  where")
     for name in wanted:
         m = measure(run, names.index(name), args.envs, args.steps)
         print(
             f"{name:12s} {m['fall']:6.1f} {m['effector']:9.1f} {m['root']:6.1f} {m['heading']:8.1f} "
-            f"{m['worst']:>7s} {m['len']:6.1f}"
+            f"{m['worst']:>7s} {m['len']:6.1f}  {m['where']}"
         )
 
 
