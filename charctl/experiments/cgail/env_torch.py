@@ -22,7 +22,6 @@ Units and frames: radians (yaw about world +y, PD targets), metres, m/s; world y
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 
 import torch
 import torch.nn.functional as F
@@ -42,36 +41,21 @@ from charctl.experiments.cgail.rules import (
     pose_key_error_frames,
     pose_keys,
     reference_check,
-    reference_pose_error,
     restart_after_ramp,
     root_height_scale,
     skill_probabilities,
     state_dim,
     switch_commands,
+    timed_pose_error,
     tracking_reward,
     update_fall_rates,
     yaw_scale,
 )
 from charctl.experiments.cgail.skills import SkillData
+from charctl.experiments.cgail.step_result import StepResult
 from charctl.experiments.cgail.warp_kinematics import sim_kinematics
 from charctl.motion import rotations_torch as RT
 from charctl.sim.batch import SimSettings
-
-
-@dataclass
-class DeviceStepResult:
-    """One control step of all envs, tensors on the device (fields as `env.StepResult`)."""
-
-    state: torch.Tensor  # (N, state_dim) next policy state (after resets)
-    obs: torch.Tensor  # (N, 133) next disc obs (after resets)
-    pair_next: torch.Tensor  # (N, 133) o_t+1 of the transition just taken (before resets)
-    final_state: torch.Tensor  # (N, state_dim) s_t+1 before resets (truncation bootstrapping)
-    r_goal: torch.Tensor  # (N,)
-    r_track: torch.Tensor  # (N,) tracking reward (0 when not tracking)
-    terminated: torch.Tensor  # (N,) bool: fall or blow-up
-    truncated: torch.Tensor  # (N,) bool: time limit or end of a non-looping reference clip
-    unstable: torch.Tensor  # (N,) bool: simulator blow-up this step
-    pose_ended: torch.Tensor | None = None  # (N,) bool: ended by a large pose error (part of `terminated`)
 
 
 class CgailDeviceEnv:
@@ -95,6 +79,7 @@ class CgailDeviceEnv:
         yaw_error_threshold: float = 0.0,
         goal_reference_window: int = 0,
         reference_reward: bool = False,
+        pose_time_tolerance: int = 0,
         device: str | torch.device = "cpu",
         sim=None,
     ):
@@ -108,6 +93,7 @@ class CgailDeviceEnv:
         self.root_scale = root_height_scale(self.pose_threshold, float(root_height_threshold))
         self.yaw_scale = yaw_scale(self.pose_threshold, float(yaw_error_threshold))  # 0: no heading check
         self.goal_window = int(goal_reference_window)  # 0: heading-goal skills scored against the closest frame
+        self.time_tolerance = int(pose_time_tolerance)  # reward.pose_time_tolerance (0: the timed frame only)
         self.reference_reward = bool(reference_reward)
         self.phase_obs = bool(getattr(env_cfg, "phase_obs", False)) and not tracking
         self.timed_reference = self.pose_threshold > 0 or self.phase_obs  # reference advanced, restarting at frame 0
@@ -288,7 +274,17 @@ class CgailDeviceEnv:
     def _pose_error(self, obs: torch.Tensor, ref: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """((N,) m, (N, 133)) as `CgailEnv._pose_error`: against the timed reference `ref`, or, for skills with
         a heading goal, against their clip's closest frame (every env is scored both ways; a mask picks)."""
-        timed = reference_pose_error(obs, ref, self.root_scale)
+        timed = timed_pose_error(
+            obs,
+            ref,
+            self.ref_keys,
+            self.cmd,
+            self.ref_frame,
+            self.clip_loops,
+            self.clip_frames,
+            self.time_tolerance,
+            self.root_scale,
+        )
         goal = self.has_goal[self.cmd]
         rows = IndexRows(goal) if self.compact_rows else MaskRows(goal)
         cmd = rows.pick(self.cmd)
@@ -327,7 +323,7 @@ class CgailDeviceEnv:
         return int(self._falls)
 
     # ------------------------------------------------------------------ step
-    def step(self, actions: torch.Tensor, force=None, force_substeps: int = 0) -> DeviceStepResult:
+    def step(self, actions: torch.Tensor, force=None, force_substeps: int = 0) -> StepResult:
         """Apply PD targets rest + action_scale * actions (radians) for one control step; `force`
         (N, nbody, 6) world-frame push held for the first `force_substeps` physics substeps."""
         targets = self.rest + self.cfg.action_scale * torch.as_tensor(actions, dtype=self.dtype, device=self.device)
@@ -380,7 +376,7 @@ class CgailDeviceEnv:
             self._restart_reference_after_ramp()
         self.reset(done)
         self._maybe_switch(~done)
-        return DeviceStepResult(
+        return StepResult(
             self._state, self._obs, pair_next, final_state, r_goal, r_track, terminated, truncated, unstable, pose_ended
         )
 
