@@ -4,7 +4,7 @@
 
 Rolls `--envs` envs per skill, each commanded with the skill (mean actions, training's random start frames and
 headings, no switches), under the run's own training rules (pose threshold and its radii, the goal-reference
-window, the pose time tolerance or `--tolerance`), and splits every episode end by what ended it:
+window), and splits every episode end by what ended it:
 
 - `fall`: a non-foot body touched the ground (or the simulation blew up);
 - `effector`: the pose check, a hand or foot farther than the pose threshold from the reference (m, relative to
@@ -53,7 +53,6 @@ def measure(run, skill: int, envs: int, steps: int) -> dict[str, float | str]:
         yaw_error_threshold=float(r.get("yaw_error_threshold", 0.0)),
         goal_reference_window=int(r.get("goal_reference_window", 0)),
         reference_reward=True,
-        pose_time_tolerance=int(r.get("pose_time_tolerance", 0)),
     )
     seen: dict[str, np.ndarray] = {}
     pose_error = env._pose_error
@@ -118,13 +117,10 @@ def main() -> None:
     ap.add_argument("--skills", default="", help="comma-separated skills (default: all of the run's)")
     ap.add_argument("--envs", type=int, default=32)
     ap.add_argument("--steps", type=int, default=300, help="control steps (30 Hz)")
-    ap.add_argument("--tolerance", type=int, default=None, help="reward.pose_time_tolerance (default: the run's)")
     args = ap.parse_args()
-    if args.envs < 1 or args.steps < 1 or (args.tolerance is not None and args.tolerance < 0):
-        raise SystemExit("error: --envs and --steps must be >= 1, --tolerance >= 0")
+    if args.envs < 1 or args.steps < 1:
+        raise SystemExit("error: --envs and --steps must be >= 1")
     run = load_eval_run(args.run, device="cpu")
-    if args.tolerance is not None:
-        run.cfg.reward.pose_time_tolerance = args.tolerance
     names = [s.name for s in run.agent.skills]
     wanted = [s for s in args.skills.split(",") if s] or names
     unknown = [s for s in wanted if s not in names]
@@ -132,11 +128,7 @@ def main() -> None:
         raise SystemExit(f"error: {', '.join(unknown)} not among this run's skills ({', '.join(names)})")
     if float(run.cfg.reward.pose_error_threshold) <= 0:
         raise SystemExit("error: this run has no pose check (reward.pose_error_threshold is 0)")
-    tolerance = int(run.cfg.reward.get("pose_time_tolerance", 0))
-    print(
-        f"{args.run}: {args.envs} envs x {args.steps} steps per skill, pose time tolerance {tolerance};"
-        " ends per 1000 steps"
-    )
+    print(f"{args.run}: {args.envs} envs x {args.steps} steps per skill; ends per 1000 steps")
     print(f"{'skill':12s} {'fall':>6s} {'effector':>9s} {'root':>6s} {'heading':>8s} {'worst':>7s} {'len':>6s}  where")
     for name in wanted:
         m = measure(run, names.index(name), args.envs, args.steps)

@@ -295,29 +295,3 @@ def test_reference_check_by_hand(arr):
     )
     assert _np(checked).tolist() == [True, True, False, False, True] and not _np(ended).any()
     assert _np(new_yaw).tolist() == yaw_err.tolist() and _np(r).tolist() == given.tolist()
-
-
-@pytest.mark.parametrize("arr", LIBS)
-def test_tolerance_frames_wrap_a_loop_and_clamp_the_others(arr):
-    """reward.pose_time_tolerance 2 on 6-frame clips. Looping (period 5: frame 5 is frame 0 again): around frame 0,
-    frames 3 4 0 1 2; around 4: 2 3 4 0 1. Not looping: around 0, 0 0 0 1 2; around 5 (the last), 3 4 5 5 5."""
-    frame, loops, n = arr(np.array([0, 4, 0, 5])), arr(np.array([True, True, False, False])), arr(np.array([6] * 4))
-    got = _np(rules.tolerance_frames(frame, loops, n, 2)).tolist()
-    assert got == [[3, 4, 0, 1, 2], [2, 3, 4, 0, 1], [0, 0, 0, 1, 2], [3, 4, 5, 5, 5]]
-    assert _np(rules.tolerance_frames(frame, loops, n, 0)).tolist() == [[0], [4], [0], [5]]
-
-
-@pytest.mark.parametrize("arr", LIBS)
-def test_tolerant_pose_error_is_the_smallest_over_the_window(arr):
-    """Three candidate frames whose right ankle is 0.6, 0.3 (3-4-5 scaled) and 0.9 m from the pose: 0.3 m; the
-    root-height term counts as in pose_key_error (0.1 m lower, root scale 5: 0.5 m, which then wins)."""
-    keys = np.zeros((2, 13))
-    window = np.zeros((2, 3, 13))
-    window[:, 0, 1:4] = [0.6, 0.0, 0.0]
-    window[:, 1, 1:4] = [0.18, 0.24, 0.0]
-    window[:, 2, 1:4] = [0.0, 0.0, 0.9]
-    window[1, :, 0] = -0.1
-    got = _np(rules.tolerant_pose_error(arr(keys), arr(window), root_scale=5.0))
-    assert got == pytest.approx([0.3, 0.5])
-    one = _np(rules.tolerant_pose_error(arr(keys), arr(window[:, 1:2]), root_scale=5.0))
-    assert one == pytest.approx(_np(rules.pose_key_error(arr(keys), arr(window[:, 1]), root_scale=5.0)))

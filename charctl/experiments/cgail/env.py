@@ -38,17 +38,17 @@ from charctl.experiments.cgail.rules import (
     pose_key_error,
     pose_keys,
     reference_check,
+    reference_pose_error,
     restart_after_ramp,
     root_height_scale,
     skill_probabilities,
     state_dim,
     switch_commands,
-    timed_pose_error,
     tracking_reward,
     update_fall_rates,
     yaw_scale,
 )
-from charctl.experiments.cgail.skills import SkillData, pad_to_longest
+from charctl.experiments.cgail.skills import SkillData
 from charctl.experiments.cgail.step_result import StepResult
 from charctl.motion import rotations as R
 from charctl.sim.batch import BatchedHumanoid, SimSettings
@@ -68,7 +68,6 @@ class CgailEnv:
         yaw_error_threshold: float = 0.0,
         goal_reference_window: int = 0,
         reference_reward: bool = False,
-        pose_time_tolerance: int = 0,
     ):
         self.skills = skills
         self.tracking = tracking  # phase in the state, reference frame advanced every step
@@ -77,7 +76,6 @@ class CgailEnv:
         self.root_scale = root_height_scale(self.pose_threshold, float(root_height_threshold))
         self.yaw_scale = yaw_scale(self.pose_threshold, float(yaw_error_threshold))  # 0: no heading check
         self.goal_window = int(goal_reference_window)  # 0: heading-goal skills scored against the closest frame
-        self.time_tolerance = int(pose_time_tolerance)  # reward.pose_time_tolerance (0: the timed frame only)
         self.reference_reward = bool(reference_reward)  # r_track against that reference (reward.w_track)
         self.cfg = env_cfg = plain_section(env_cfg)  # typed fields, cheap reads in the step loop
         # env.phase_obs: the timed reference's phase in the state of the adversarial policy (training and evaluation)
@@ -101,7 +99,6 @@ class CgailEnv:
         self.rest = np.zeros(self.sim.layout.nu)
         self.clip_frames = np.array([len(sk.obs) for sk in skills])
         self.clip_loops = np.array([sk.loop for sk in skills])
-        self.ref_keys = pose_keys(pad_to_longest([sk.obs for sk in skills]))  # (K, T, 13): what the pose error compares
         self.state_dim = state_dim(tracking or self.phase_obs)
         self.obs_dim = self.state_dim
         self.fall_count = 0
@@ -239,21 +236,9 @@ class CgailEnv:
         heading goal (locomotion), scored against their clip's closest frame (`rules.goal_reference_frame`: the
         whole clip, or with reward.goal_reference_window a few frames on from the last one): a walk at a cadence
         of its own is no error. In-place looping clips (jump, dances, spinkick) keep the timed reference, so standing in
-        one of their poses is an error once the clip moves on; with reward.pose_time_tolerance w > 0 the smallest
-        error over the timed frame's +-w neighbours (`rules.tolerant_pose_error`; the returned reference, which
-        w_track scores against, stays the timed frame). Returns the reference each env was scored against as well."""
-        err = timed_pose_error(
-            obs,
-            ref,
-            self.ref_keys,
-            self.cmd,
-            self.ref_frame,
-            self.clip_loops,
-            self.clip_frames,
-            self.time_tolerance,
-            self.root_scale,
-        )
-        ref = ref.copy()
+        one of their poses is an error once the clip moves on. Returns the reference each env was scored
+        against as well."""
+        err, ref = reference_pose_error(obs, ref, self.root_scale), ref.copy()
         synced = self.ref_active & (self.ref_grace == 0)
         for s in np.unique(self.cmd[self.has_goal[self.cmd]]):
             m = np.flatnonzero(self.cmd == s)

@@ -41,12 +41,12 @@ from charctl.experiments.cgail.rules import (
     pose_key_error_frames,
     pose_keys,
     reference_check,
+    reference_pose_error,
     restart_after_ramp,
     root_height_scale,
     skill_probabilities,
     state_dim,
     switch_commands,
-    timed_pose_error,
     tracking_reward,
     update_fall_rates,
     yaw_scale,
@@ -79,7 +79,6 @@ class CgailDeviceEnv:
         yaw_error_threshold: float = 0.0,
         goal_reference_window: int = 0,
         reference_reward: bool = False,
-        pose_time_tolerance: int = 0,
         device: str | torch.device = "cpu",
         sim=None,
     ):
@@ -93,7 +92,6 @@ class CgailDeviceEnv:
         self.root_scale = root_height_scale(self.pose_threshold, float(root_height_threshold))
         self.yaw_scale = yaw_scale(self.pose_threshold, float(yaw_error_threshold))  # 0: no heading check
         self.goal_window = int(goal_reference_window)  # 0: heading-goal skills scored against the closest frame
-        self.time_tolerance = int(pose_time_tolerance)  # reward.pose_time_tolerance (0: the timed frame only)
         self.reference_reward = bool(reference_reward)
         self.phase_obs = bool(getattr(env_cfg, "phase_obs", False)) and not tracking
         self.timed_reference = self.pose_threshold > 0 or self.phase_obs  # reference advanced, restarting at frame 0
@@ -274,17 +272,7 @@ class CgailDeviceEnv:
     def _pose_error(self, obs: torch.Tensor, ref: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """((N,) m, (N, 133)) as `CgailEnv._pose_error`: against the timed reference `ref`, or, for skills with
         a heading goal, against their clip's closest frame (every env is scored both ways; a mask picks)."""
-        timed = timed_pose_error(
-            obs,
-            ref,
-            self.ref_keys,
-            self.cmd,
-            self.ref_frame,
-            self.clip_loops,
-            self.clip_frames,
-            self.time_tolerance,
-            self.root_scale,
-        )
+        timed = reference_pose_error(obs, ref, self.root_scale)
         goal = self.has_goal[self.cmd]
         rows = IndexRows(goal) if self.compact_rows else MaskRows(goal)
         cmd = rows.pick(self.cmd)

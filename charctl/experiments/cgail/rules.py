@@ -121,47 +121,6 @@ def goal_reference_frame(
     return xp.argmin(xp.where(allowed, each, xp.full_like(each, math.inf)), axis=1)
 
 
-def tolerance_frames(frame: Array, loops: Array, clip_frames: Array, tolerance: int) -> Array:
-    """(n, 2 `tolerance` + 1) the clip frames within `tolerance` frames of each row's timed reference frame
-    `frame` (n,) (reward.pose_time_tolerance), earliest first: cyclic over a looping clip's period (`loops`
-    (n,) bool; clip_frames - 1 frames, its last frame is its first, as `advance_reference`), clamped to
-    [0, clip_frames - 1] for a clip that does not loop."""
-    xp = namespace(frame, clip_frames)
-    t = frame[:, None] + xp.arange(-tolerance, tolerance + 1, device=device_of(frame))[None, :]
-    last = xp.clip(clip_frames - 1, min=1)[:, None]
-    return xp.where(loops[:, None], t % last, xp.clip(t, min=xp.zeros_like(last), max=last))
-
-
-def tolerant_pose_error(keys: Array, window_keys: Array, root_scale: float = 1.0) -> Array:
-    """(n,) m: the smallest `pose_key_error` of `pose_keys` rows `keys` (n, 13) against their reference's frames
-    `window_keys` (n, F, 13) (the clip at `tolerance_frames`): a pose reached up to `tolerance` control steps
-    early or late is no error (reward.pose_time_tolerance). With F = 1 it is `pose_key_error` at the timed frame."""
-    xp = namespace(keys, window_keys)
-    return xp.min(pose_key_error(keys[:, None, :], window_keys, root_scale), axis=1)
-
-
-def timed_pose_error(
-    obs: Array,
-    ref: Array,
-    ref_keys: Array,
-    cmd: Array,
-    frame: Array,
-    loops: Array,
-    clip_frames: Array,
-    tolerance: int,
-    root_scale: float = 1.0,
-) -> Array:
-    """(N,) m: the pose error of disc observations `obs` (N, 133) against the timed reference, what both envs'
-    `_pose_error` give a timed skill: `reference_pose_error` against `ref` (N, 133), the reference at frame
-    `frame` (N,) of clip `cmd` (N,), or, with `tolerance` w > 0 (reward.pose_time_tolerance), `tolerant_pose_error`
-    over the frames `tolerance_frames` gives (`ref_keys` (K, T, 13) the clips' `pose_keys`, padded; `loops`,
-    `clip_frames` (K,) per clip)."""
-    if tolerance <= 0:
-        return reference_pose_error(obs, ref, root_scale)
-    frames = tolerance_frames(frame, loops[cmd], clip_frames[cmd], tolerance)
-    return tolerant_pose_error(pose_keys(obs), ref_keys[cmd[:, None], frames], root_scale)
-
-
 def reference_pose_error(obs: Array, ref: Array, root_scale: float = 1.0) -> Array:
     """(N,) m: the largest distance between simulated and reference disc observations (N, 133) over the
     four end effectors (hands and feet, relative to the root in the heading frame) and the root height

@@ -67,7 +67,6 @@ class CgailLearner(AgentCounters):
             root_height_threshold=cfg.reward.root_height_threshold,
             yaw_error_threshold=cfg.reward.yaw_error_threshold,
             goal_reference_window=cfg.reward.goal_reference_window,
-            pose_time_tolerance=cfg.reward.pose_time_tolerance,
             reference_reward=cfg.reward.w_track > 0,
         )
         if self.backend in ("warp", "torch"):
