@@ -199,3 +199,42 @@ def test_smoke_training_with_the_torch_backend(tmp_path):
     (run_dir,) = (tmp_path / "cgail").iterdir()
     run = load_trained_run(run_dir)
     assert run.agent.samples == 512 and run.agent.model.obs_dim == 245  # 241 features + goal + phase
+
+
+def test_a_shipped_policy_rolls_out_the_same_on_both_envs():
+    """The shipped 3-skill policy, one env per skill (held command, RSI at frame 0, no random yaw, goals straight
+    ahead: no random number enters), 90 control steps with its mean actions on the numpy env and on the torch env
+    over C MuJoCo: the same body positions (measured here: walk and run bit for bit; the kick, whose state carries
+    the clip phase, 6.8e-6 m at 3 s: float64 cos/sin rounded differently by numpy and torch, seen through the float32
+    policy input; the bounds leave room for another CPU's rounding, a real difference is millimetres or more).
+    The deterministic evaluations (`--fidelity`, the pins) therefore agree on the two envs; what differs is the
+    random draws (docs/cgail.md, "What deleting the numpy env would take")."""
+    from omegaconf import OmegaConf
+
+    from charctl.experiments.cgail.drive import mean_action
+    from charctl.experiments.cgail.env import CgailEnv
+    from charctl.experiments.cgail.env_torch import CgailDeviceEnv
+    from charctl.experiments.cgail.rollouts import load_eval_run
+    from charctl.experiments.cgail.train import _torch_cpu_sim
+
+    from conftest import REPO
+
+    agent = load_eval_run(REPO / "pretrained/cgail-3skill-fidelity", device="cpu").agent
+    k = len(agent.skills)
+    cfg = OmegaConf.merge(agent.cfg.env, {"num_envs": k, "switch_prob": 0.0, "goal_max_angle_deg": 0.0})
+    c_env = CgailEnv(agent.skills, cfg, seed=0, conditional=True)
+    t_env = CgailDeviceEnv(agent.skills, cfg, seed=0, conditional=True, device="cpu", sim=_torch_cpu_sim(cfg))
+    c_env.forced_command, t_env.forced_command = np.arange(k), torch.arange(k)
+    for env in (c_env, t_env):
+        env.start_frame, env.random_yaw = 0, False
+    c_env.reset(np.arange(k))
+    t_env.reset(torch.ones(k, dtype=torch.bool))
+    for _ in range(90):
+        c_env.step(mean_action(agent, c_env))
+        with torch.no_grad():
+            state, blend = t_env.state, t_env.command_blend().to(torch.float32)
+            t_env.step(agent.model.mean_action(state, blend).float())
+    diff = np.abs(c_env.sim.body_pos_rows() - t_env.sim.base.body_pos_rows()).max(axis=(1, 2))
+    names = [s.name for s in agent.skills]
+    assert diff[names.index("walk")] < 1e-6 and diff[names.index("run")] < 1e-6
+    assert diff[names.index("right_kick")] < 1e-4
