@@ -12,8 +12,6 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from charctl.experiments.cgail.skills import pad_to_longest
-
 
 class MaskRows:
     """A data-dependent subset of the envs (the envs a reset writes, the envs scored against their closest clip
@@ -59,5 +57,7 @@ class IndexRows:
 
 
 def pad_skill_tables(arrays: list[np.ndarray], device: torch.device, dtype=torch.float32) -> torch.Tensor:
-    """(K, max_len, ...) tensor of per-skill arrays, each padded with its last row (`skills.pad_to_longest`)."""
-    return torch.as_tensor(pad_to_longest(arrays), dtype=dtype, device=device)
+    """(K, max_len, ...) tensor of per-skill arrays, each padded with its last row."""
+    longest = max(len(a) for a in arrays)
+    out = np.stack([np.concatenate([a, np.repeat(a[-1:], longest - len(a), axis=0)]) for a in arrays])
+    return torch.as_tensor(out, dtype=dtype, device=device)

@@ -114,10 +114,3 @@ class DemoPairs:
             if m.any():
                 out[m] = self.pairs[s][rng.integers(0, len(self.pairs[s]), size=int(m.sum()))]
         return out, k
-
-
-def pad_to_longest(arrays: list[np.ndarray]) -> np.ndarray:
-    """(K, max_len, ...) per-skill arrays stacked, each padded with its last row (frame tables of clips of
-    different lengths, indexed by (skill, frame))."""
-    longest = max(len(a) for a in arrays)
-    return np.stack([np.concatenate([a, np.repeat(a[-1:], longest - len(a), axis=0)]) for a in arrays])
