@@ -32,6 +32,7 @@ def measure(run, skill: int, envs: int, steps: int, window: int) -> dict[str, fl
 
     from charctl.experiments.cgail.drive import policy_steps
     from charctl.experiments.cgail.env import CgailEnv
+    from charctl.experiments.cgail.env_rules import env_rules
     from charctl.experiments.cgail.rules import pose_key_error, pose_keys
 
     torch.manual_seed(0)
@@ -42,12 +43,13 @@ def measure(run, skill: int, envs: int, steps: int, window: int) -> dict[str, fl
         env_cfg,
         seed=0,
         conditional=run.agent.conditional,
-        pose_error_threshold=max(float(r.pose_error_threshold), 0.5),
-        pose_error_grace_steps=int(r.pose_error_grace_steps),
-        root_height_threshold=float(r.get("root_height_threshold", 0.0)),
-        yaw_error_threshold=float(r.get("yaw_error_threshold", 0.0)),
-        goal_reference_window=window,
-        reference_reward=True,
+        **env_rules(
+            r,
+            tracking=False,
+            pose_error_threshold=max(float(r.pose_error_threshold), 0.5),
+            goal_reference_window=window,
+            reference_reward=True,
+        ),
     )
     env.forced_command = np.full(envs, skill)
     env.reset(np.arange(envs))

@@ -36,6 +36,7 @@ def measure(run, skill: int, envs: int, steps: int) -> dict[str, float | str]:
 
     from charctl.experiments.cgail.drive import policy_steps
     from charctl.experiments.cgail.env import CgailEnv
+    from charctl.experiments.cgail.env_rules import env_rules
     from charctl.experiments.cgail.rules import pose_keys
 
     torch.manual_seed(0)
@@ -47,12 +48,7 @@ def measure(run, skill: int, envs: int, steps: int) -> dict[str, float | str]:
         env_cfg,
         seed=0,
         conditional=run.agent.conditional,
-        pose_error_threshold=threshold,
-        pose_error_grace_steps=int(r.pose_error_grace_steps),
-        root_height_threshold=float(r.get("root_height_threshold", 0.0)),
-        yaw_error_threshold=float(r.get("yaw_error_threshold", 0.0)),
-        goal_reference_window=int(r.get("goal_reference_window", 0)),
-        reference_reward=True,
+        **env_rules(r, tracking=False, reference_reward=True),
     )
     seen: dict[str, np.ndarray] = {}
     pose_error = env._pose_error

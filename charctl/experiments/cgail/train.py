@@ -22,6 +22,7 @@ import torch
 from charctl.experiments.cgail.agent import Agent, agent_state, build_agent, load_agent_state
 from charctl.experiments.cgail.disc_update import class_accuracy_on_policy, update_discriminator
 from charctl.experiments.cgail.env import CgailEnv
+from charctl.experiments.cgail.env_rules import env_rules
 from charctl.experiments.cgail.reward import discriminator_rewards, total_reward
 from charctl.experiments.cgail.rollout import Rollout, collect_rollout
 from charctl.experiments.cgail.termination import LowStyleTermination
@@ -58,17 +59,7 @@ class CgailLearner(AgentCounters):
         self.backend = resolve_backend(str(getattr(cfg.env, "backend", "cpu")), self.device)  # cpu | warp | torch
         self.agent = build_agent(cfg, self.device)
         env_class = CgailEnv
-        env_args = dict(
-            seed=cfg.seed,
-            conditional=self.agent.conditional,
-            tracking=cfg.reward.kind == "tracking",
-            pose_error_threshold=cfg.reward.pose_error_threshold,
-            pose_error_grace_steps=cfg.reward.pose_error_grace_steps,
-            root_height_threshold=cfg.reward.root_height_threshold,
-            yaw_error_threshold=cfg.reward.yaw_error_threshold,
-            goal_reference_window=cfg.reward.goal_reference_window,
-            reference_reward=cfg.reward.w_track > 0,
-        )
+        env_args = dict(seed=cfg.seed, conditional=self.agent.conditional, **env_rules(cfg.reward))
         if self.backend in ("warp", "torch"):
             from charctl.experiments.cgail.env_torch import CgailDeviceEnv
         if self.backend == "warp":  # MuJoCo Warp on the same device: rollout never leaves it

@@ -1,0 +1,31 @@
+"""The training rules a cgail env enforces, read from the run's `reward` config in one place.
+
+`CgailEnv` / `CgailDeviceEnv` take these as keyword arguments; training (`train.CgailLearner`) and the
+diagnostic scripts that replay a run under its training rules (`scripts/diag_terminations.py`,
+`scripts/diag_goal_reference.py`) build them here, so a new termination or reference knob is wired once.
+Evaluation envs (`policy.TrainedRun.make_env`, `fidelity`) take none of them: they judge a policy by its
+falls only.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+
+def env_rules(reward, **overrides: Any) -> dict[str, Any]:
+    """Env keyword arguments for the reward config `reward` (a `Config.reward` node), `overrides` replacing
+    single entries (a diagnostic that varies one rule). Units: thresholds in m (pose, root height) and rad
+    (yaw), grace in control steps, the window in clip frames (0: the closest frame anywhere)."""
+    rules = dict(
+        tracking=str(reward.kind) == "tracking",
+        pose_error_threshold=float(reward.pose_error_threshold),
+        pose_error_grace_steps=int(reward.pose_error_grace_steps),
+        root_height_threshold=float(reward.root_height_threshold),
+        yaw_error_threshold=float(reward.yaw_error_threshold),
+        goal_reference_window=int(reward.goal_reference_window),
+        reference_reward=float(reward.w_track) > 0,
+    )
+    unknown = set(overrides) - set(rules)
+    if unknown:
+        raise TypeError(f"env_rules: not a rule: {', '.join(sorted(unknown))}")
+    return {**rules, **overrides}
