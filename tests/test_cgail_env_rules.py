@@ -55,5 +55,5 @@ def test_the_training_env_enforces_them():
     )
     env = CgailEnv(load_skills(select_skills(cfg), cfg.env.control_hz), cfg.env, seed=0, **env_rules(cfg.reward))
     assert env.pose_threshold == 0.5 and env.pose_grace == int(cfg.reward.pose_error_grace_steps)
-    assert env.yaw_scale == pytest.approx(0.5 / 1.5) and env.root_scale == 1.0  # the heading radius only (1: the 0.5-m radius)
+    assert env.yaw_scale == pytest.approx(0.5 / 1.5) and env.root_scale == 1.0  # root_scale 1: no root radius
     assert env.timed_reference
