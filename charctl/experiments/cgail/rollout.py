@@ -176,7 +176,8 @@ def _collect_rollout_device(
         done = res.terminated | res.truncated
         if terminate is not None:  # low style for too long: reset now (the mask may be all false)
             low = terminate.update(ro.pairs[t], blend, done)
-            env.reset(low)
+            if not env.compact_rows or bool(low.any()):  # on the CPU a host read is cheaper than an empty reset
+                env.reset(low)
             done = done | low
             style_ends += low.sum()
         final_states[t], truncated[t], ended[t] = res.final_state, res.truncated, done

@@ -47,7 +47,8 @@ def sim_kinematics(sim, rows: torch.Tensor | None = None) -> Kinematics:
         else:
             lin, ang, pos, rot, com = lin[rows], ang[rows], pos[rows], rot[rows], com[rows]
     masses, com_local = _mass_tables(str(pos.device), pos.dtype)
-    offset = RT.rotate(rot, com_local.expand(pos.shape))
+    body_mat = RT.to_matrix(rot)  # kept for the heading frame (`features.heading_frame` reuses it)
+    offset = (body_mat @ com_local[:, :, None])[..., 0]  # body COM - frame origin, world
     com_vel_bodies = lin + torch.cross(ang, offset, dim=-1)
     com_vel = torch.einsum("nbi,b->ni", com_vel_bodies, masses) / sim.total_mass
-    return Kinematics(pos, rot, lin, ang, com, com_vel)
+    return Kinematics(pos, rot, lin, ang, com, com_vel, body_mat)
