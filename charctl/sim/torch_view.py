@@ -148,15 +148,6 @@ class TorchBatchedHumanoid:
         lin, ang = self.base.body_velocities()
         return torch.from_numpy(lin), as_tensor_view(ang)
 
-    def body_rows(self, rows: torch.Tensor) -> tuple[torch.Tensor, ...]:
-        """(body_pos, body_quat_xyzw, linear velocities, angular velocities, com) of the envs `rows` ((n,) integer
-        ids) only, shapes (n, 15, 3 | 4) and (n, 3): `BatchedHumanoid`'s numpy code on those rows (as the numpy env's
-        resets read them), the same numbers as the properties' rows."""
-        r, b = rows.numpy(), self.base
-        pos = b.body_pos_rows(r)
-        lin, ang = b.body_velocities_rows(r, pos)
-        return tuple(torch.from_numpy(x) for x in (pos, b.body_quat_rows(r), lin, ang, b.subtree_com[r][:, 1]))
-
     def com(self) -> torch.Tensor:
         """(N, 3) whole-body centre of mass (m), world frame; a view of MuJoCo's subtree_com."""
         return self.subtree_com[:, 1]

@@ -11,11 +11,13 @@ Frames and units: world y-up, metres, m/s, rad/s; quaternions xyzw.
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 
 import torch
 
 from charctl.experiments.cgail.features import Kinematics
+from charctl.experiments.cgail.features import sim_kinematics as numpy_sim_kinematics
 from charctl.motion import rotations_torch as RT
 from charctl.motion.skeleton import load_skeleton
 
@@ -31,21 +33,24 @@ def _mass_tables(device: str, dtype: torch.dtype = torch.float64) -> tuple[torch
 
 def sim_kinematics(sim, rows: torch.Tensor | None = None) -> Kinematics:
     """Kinematics of a `WarpBatchedHumanoid` after a step (exact MuJoCo velocities), on its device: of every
-    env, or of the envs `rows` ((n,) integer ids; the CPU env's resets, `CgailDeviceEnv.compact_rows`), read
-    for those rows only where the simulator can (`TorchBatchedHumanoid.body_rows`).
+    env, or of the envs `rows` ((n,) integer ids; the CPU env's resets, `CgailDeviceEnv.compact_rows`).
+
+    Over C MuJoCo (`TorchBatchedHumanoid`, env.backend=torch) this is the numpy env's reader
+    (`features.sim_kinematics`) on the wrapped `BatchedHumanoid`, its arrays wrapped without copies: the
+    same numbers as the numpy env, and fewer, larger operations than torch's on the CPU.
 
     COM velocity = mass-weighted velocities of the body centres of mass (frame origin + rotated
     local COM offset), as in `features.sim_kinematics`.
     """
-    if rows is not None and hasattr(sim, "body_rows"):
-        pos, rot, lin, ang, com = sim.body_rows(rows)
+    if hasattr(sim, "base"):  # TorchBatchedHumanoid: C MuJoCo's numpy arrays
+        k = numpy_sim_kinematics(sim.base, slice(None) if rows is None else rows.numpy())
+        return Kinematics(*(torch.from_numpy(getattr(k, f.name)) for f in dataclasses.fields(k)))
+    lin, ang = sim.body_velocities()
+    pos, rot, com = sim.body_pos, sim.body_quat_xyzw, sim.com()
+    if rows is None:
+        com = com.clone()  # a view of the simulator's live array
     else:
-        lin, ang = sim.body_velocities()
-        pos, rot, com = sim.body_pos, sim.body_quat_xyzw, sim.com()
-        if rows is None:
-            com = com.clone()  # a view of the simulator's live array
-        else:
-            lin, ang, pos, rot, com = lin[rows], ang[rows], pos[rows], rot[rows], com[rows]
+        lin, ang, pos, rot, com = lin[rows], ang[rows], pos[rows], rot[rows], com[rows]
     masses, com_local = _mass_tables(str(pos.device), pos.dtype)
     body_mat = RT.to_matrix(rot)  # kept for the heading frame (`features.heading_frame` reuses it)
     offset = (body_mat @ com_local[:, :, None])[..., 0]  # body COM - frame origin, world
