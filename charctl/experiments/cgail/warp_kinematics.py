@@ -20,6 +20,7 @@ from charctl.experiments.cgail.features import Kinematics
 from charctl.experiments.cgail.features import sim_kinematics as numpy_sim_kinematics
 from charctl.motion import rotations_torch as RT
 from charctl.motion.skeleton import load_skeleton
+from charctl.sim.torch_view import TorchBatchedHumanoid
 
 
 @functools.lru_cache(maxsize=8)
@@ -42,7 +43,7 @@ def sim_kinematics(sim, rows: torch.Tensor | None = None) -> Kinematics:
     COM velocity = mass-weighted velocities of the body centres of mass (frame origin + rotated
     local COM offset), as in `features.sim_kinematics`.
     """
-    if hasattr(sim, "base"):  # TorchBatchedHumanoid: C MuJoCo's numpy arrays
+    if isinstance(sim, TorchBatchedHumanoid):  # C MuJoCo's numpy arrays underneath
         k = numpy_sim_kinematics(sim.base, slice(None) if rows is None else rows.numpy())
         return Kinematics(*(torch.from_numpy(getattr(k, f.name)) for f in dataclasses.fields(k)))
     lin, ang = sim.body_velocities()
