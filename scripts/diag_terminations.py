@@ -50,15 +50,6 @@ def measure(run, skill: int, envs: int, steps: int) -> dict[str, float | str]:
         conditional=run.agent.conditional,
         **env_rules(r, tracking=False, reference_reward=True),
     )
-    seen: dict[str, np.ndarray] = {}
-    pose_error = env._pose_error
-
-    def spy(pair, ref):  # keep what the pose check compared, before the env resets the rows that end
-        err, scored = pose_error(pair, ref)
-        seen["keys"], seen["ref"] = pose_keys(pair), pose_keys(scored)
-        return err, scored
-
-    env._pose_error = spy
     env.forced_command = np.full(envs, skill)
     env.reset(np.arange(envs))
     counts = {"fall": 0, "effector": 0, "root": 0, "heading": 0}
@@ -75,9 +66,9 @@ def measure(run, skill: int, envs: int, steps: int) -> dict[str, float | str]:
         counts["fall"] += int((res.terminated & ~res.pose_ended).sum())
         ended = np.flatnonzero(res.pose_ended)
         if ended.size:
-            d = (seen["keys"][ended, 1:] - seen["ref"][ended, 1:]).reshape(-1, 4, 3)
-            dist = np.linalg.norm(d, axis=-1)  # (n, 4) m
-            root = np.abs(seen["keys"][ended, 0] - seen["ref"][ended, 0]) * env.root_scale
+            keys, ref = pose_keys(res.pair_next[ended]), pose_keys(res.pose_reference[ended])
+            dist = np.linalg.norm((keys[:, 1:] - ref[:, 1:]).reshape(-1, 4, 3), axis=-1)  # (n, 4) m
+            root = np.abs(keys[:, 0] - ref[:, 0]) * env.root_scale
             by_effector = dist.max(axis=1) > threshold
             by_root = ~by_effector & (root > threshold)
             counts["effector"] += int(by_effector.sum())

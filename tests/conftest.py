@@ -85,6 +85,7 @@ def assert_step_matches_cpu_env(c_env, c_res, t_env, t_res, fidelity: bool) -> N
         assert c_res.pose_ended.any() and not c_res.pose_ended.all(), c_res.pose_ended
         np.testing.assert_allclose(npy(t_res.r_track), c_res.r_track, atol=2e-3)
         assert (c_res.r_track > 0).any()
+        np.testing.assert_allclose(npy(t_res.pose_reference), c_res.pose_reference, atol=2e-3)
 
 
 def assert_config_value_refused(experiment: str, key: str, value: str, message: str) -> BaseException:

@@ -51,6 +51,18 @@ def test_reference_runs_on_from_the_rsi_frame_and_a_non_looping_clip_restarts_wi
     assert env.ref_frame.tolist() == [1, 1] and env.ref_grace.tolist() == [2, 2]
 
 
+def test_a_step_returns_the_reference_its_pose_check_compared(skills):
+    """The kick (no heading goal) is scored against its timed frame: RSI at frame 5, one control step on, frame 6
+    of the clip's disc observations (the clip is resampled at the 30-Hz control rate). Without a check: None."""
+    env = _env(skills)
+    env.forced_command = np.array([1, 1])
+    env.start_frame, env.random_yaw = 5, False
+    env.reset(np.arange(2))
+    res = env.step(np.zeros((2, 28)))
+    np.testing.assert_array_equal(res.pose_reference, skills[1].obs[[6, 6]])
+    assert _env(skills, threshold=0.0).step(np.zeros((2, 28))).pose_reference is None
+
+
 def test_a_switch_suspends_the_check_until_the_ramp_ends_then_starts_the_new_clip_at_frame_zero(skills):
     env = _env(skills, grace=2, ramp=4)
     env.forced_command = np.array([0, 0])

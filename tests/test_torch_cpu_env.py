@@ -164,7 +164,7 @@ def test_row_form_on_the_cpu_gives_the_mask_forms_episodes(window):
             env.reset(extra)
         for name in exact:
             assert torch.equal(getattr(results[0], name), getattr(results[1], name)), name
-        for name in ("state", "obs", "pair_next", "final_state", "r_goal", "r_track"):
+        for name in ("state", "obs", "pair_next", "final_state", "r_goal", "r_track", "pose_reference"):
             torch.testing.assert_close(getattr(results[0], name), getattr(results[1], name), rtol=0, atol=1e-12)
         for name in ("cmd", "prev_cmd", "steps", "ref_frame", "ref_active", "ref_grace"):
             assert torch.equal(getattr(rows, name), getattr(masks, name)), name

@@ -287,7 +287,7 @@ class CgailEnv:
             r_track = tracking_reward(pair_next, ref)
         r_goal = self._goal_reward(k)
         fell = self.sim.non_foot_ground_contact(self.cfg.fall_tolerance)
-        pose_ended = np.zeros(self.N, dtype=bool)
+        pose_ended, scored = np.zeros(self.N, dtype=bool), None
         if self.pose_threshold > 0:
             err, scored = self._pose_error(pair_next, ref)
             r_track, pose_ended, _, self.yaw_err = reference_check(
@@ -325,7 +325,17 @@ class CgailEnv:
             self.reset(done)
         self._maybe_switch(np.setdiff1d(np.arange(self.N), done))  # the envs that did not just reset
         return StepResult(
-            self._state, self._obs, pair_next, final_state, r_goal, r_track, terminated, truncated, unstable, pose_ended
+            self._state,
+            self._obs,
+            pair_next,
+            final_state,
+            r_goal,
+            r_track,
+            terminated,
+            truncated,
+            unstable,
+            pose_ended,
+            scored,
         )
 
     def _goal_reward(self, k) -> np.ndarray:

@@ -329,7 +329,7 @@ class CgailDeviceEnv:
             self.goal_angle, k.com_vel, self.speed[self.cmd], self.has_goal[self.cmd], self.cfg.goal_sharpness
         )
         fell = self.sim.non_foot_ground_contact(self.cfg.fall_tolerance)
-        pose_ended = no_pose_end
+        pose_ended, scored = no_pose_end, None
         if self.pose_threshold > 0:
             err, scored = self._pose_error(pair_next, ref)
             r_track, pose_ended, _, self.yaw_err = reference_check(
@@ -365,7 +365,17 @@ class CgailDeviceEnv:
         self.reset(done)
         self._maybe_switch(~done)
         return StepResult(
-            self._state, self._obs, pair_next, final_state, r_goal, r_track, terminated, truncated, unstable, pose_ended
+            self._state,
+            self._obs,
+            pair_next,
+            final_state,
+            r_goal,
+            r_track,
+            terminated,
+            truncated,
+            unstable,
+            pose_ended,
+            scored,
         )
 
     def _maybe_switch(self, mask: torch.Tensor) -> None:

@@ -22,3 +22,6 @@ class StepResult:
     truncated: Array  # (N,) bool: time limit, or the end of a non-looping clip for the tracking baseline
     unstable: Array  # (N,) bool: simulator blow-up this step
     pose_ended: Array | None = None  # (N,) bool: ended by a large pose error (part of `terminated`, not a fall)
+    # (N, 133) the reference disc obs the pose check compared `pair_next` with (before resets): the timed frame,
+    # or the closest clip frame for heading-goal skills; None where the env has no pose check
+    pose_reference: Array | None = None
