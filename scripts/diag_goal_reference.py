@@ -28,29 +28,21 @@ import numpy as np
 def measure(run, skill: int, envs: int, steps: int, window: int) -> dict[str, float]:
     """The four figures of the module docstring for one picking rule (`window` 0: the closest frame anywhere)."""
     import torch
-    from omegaconf import OmegaConf
 
     from charctl.experiments.cgail.drive import policy_steps
-    from charctl.experiments.cgail.env import CgailEnv
     from charctl.experiments.cgail.env_rules import env_rules
     from charctl.experiments.cgail.rules import pose_key_error, pose_keys
 
     torch.manual_seed(0)
     r = run.cfg.reward
-    env_cfg = OmegaConf.merge(run.cfg.env, {"num_envs": envs, "switch_prob": 0.0, "episode_seconds": 20.0})
-    env = CgailEnv(
-        run.agent.skills,
-        env_cfg,
-        seed=0,
-        conditional=run.agent.conditional,
-        **env_rules(
-            r,
-            tracking=False,
-            pose_error_threshold=max(float(r.pose_error_threshold), 0.5),
-            goal_reference_window=window,
-            reference_reward=True,
-        ),
+    rules = env_rules(
+        r,
+        tracking=False,
+        pose_error_threshold=max(float(r.pose_error_threshold), 0.5),
+        goal_reference_window=window,
+        reference_reward=True,
     )
+    env = run.make_env(envs, rules=rules, switch_prob=0.0, episode_seconds=20.0)
     env.forced_command = np.full(envs, skill)
     env.reset(np.arange(envs))
     clip_keys = pose_keys(env.skills[skill].obs)[None]  # (1, T, 13)
@@ -83,6 +75,7 @@ def measure(run, skill: int, envs: int, steps: int, window: int) -> dict[str, fl
 
 
 def main() -> None:
+    from charctl.errors import CharctlError
     from charctl.experiments.cgail.rollouts import load_eval_run
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -92,15 +85,15 @@ def main() -> None:
     ap.add_argument("--steps", type=int, default=300, help="control steps (30 Hz)")
     ap.add_argument("--window", type=int, default=3, help="reward.goal_reference_window to compare with 0")
     args = ap.parse_args()
+    if min(args.envs, args.steps, args.window) < 1:
+        raise SystemExit("error: --envs, --steps and --window must be >= 1")
     run = load_eval_run(args.run, device="cpu")
-    names = [s.name for s in run.agent.skills]
-    if args.skill not in names:
-        raise SystemExit(f"error: skill {args.skill!r} is not one of this run's skills ({', '.join(names)})")
-    skill = names.index(args.skill)
+    try:  # the run's own one-line error for a skill it does not have
+        skill = run.skill_index(args.skill)
+    except CharctlError as exc:
+        raise SystemExit(f"error: {exc}") from None
     if not run.agent.skills[skill].heading_goal:
         raise SystemExit(f"error: skill {args.skill!r} has no heading goal (it is scored against its timed frame)")
-    if args.window < 1:
-        raise SystemExit("error: --window must be >= 1")
     print(f"{args.run} {args.skill}: {args.envs} envs x {args.steps} steps")
     print(f"{'picking rule':24s} {'advance':>8s} {'visited':>8s} {'r_track':>8s} {'pose ends/1k':>13s}")
     for window in (0, args.window):

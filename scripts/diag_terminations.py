@@ -32,24 +32,14 @@ EFFECTORS = ("R foot", "L foot", "R hand", "L hand")  # rules.pose_keys' order (
 def measure(run, skill: int, envs: int, steps: int) -> dict[str, float | str]:
     """The figures of the module docstring for one skill."""
     import torch
-    from omegaconf import OmegaConf
 
     from charctl.experiments.cgail.drive import policy_steps
-    from charctl.experiments.cgail.env import CgailEnv
     from charctl.experiments.cgail.env_rules import env_rules
     from charctl.experiments.cgail.rules import pose_keys
 
     torch.manual_seed(0)
-    r = run.cfg.reward
-    threshold = float(r.pose_error_threshold)
-    env_cfg = OmegaConf.merge(run.cfg.env, {"num_envs": envs, "switch_prob": 0.0})
-    env = CgailEnv(
-        run.agent.skills,
-        env_cfg,
-        seed=0,
-        conditional=run.agent.conditional,
-        **env_rules(r, tracking=False, reference_reward=True),
-    )
+    threshold = float(run.cfg.reward.pose_error_threshold)
+    env = run.make_env(envs, rules=env_rules(run.cfg.reward, tracking=False, reference_reward=True), switch_prob=0.0)
     env.forced_command = np.full(envs, skill)
     env.reset(np.arange(envs))
     counts = {"fall": 0, "effector": 0, "root": 0, "heading": 0}
@@ -97,6 +87,7 @@ def _worst_frames(visits: np.ndarray, ends: np.ndarray, width: int = 5) -> str:
 
 
 def main() -> None:
+    from charctl.errors import CharctlError
     from charctl.experiments.cgail.rollouts import load_eval_run
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -108,17 +99,16 @@ def main() -> None:
     if args.envs < 1 or args.steps < 1:
         raise SystemExit("error: --envs and --steps must be >= 1")
     run = load_eval_run(args.run, device="cpu")
-    names = [s.name for s in run.agent.skills]
-    wanted = [s for s in args.skills.split(",") if s] or names
-    unknown = [s for s in wanted if s not in names]
-    if unknown:
-        raise SystemExit(f"error: {', '.join(unknown)} not among this run's skills ({', '.join(names)})")
+    try:  # the run's own one-line error for a skill it does not have
+        wanted = [run.skill_index(s) for s in args.skills.split(",") if s] or range(len(run.skill_names))
+    except CharctlError as exc:
+        raise SystemExit(f"error: {exc}") from None
     if float(run.cfg.reward.pose_error_threshold) <= 0:
         raise SystemExit("error: this run has no pose check (reward.pose_error_threshold is 0)")
     print(f"{args.run}: {args.envs} envs x {args.steps} steps per skill; ends per 1000 steps")
     print(f"{'skill':12s} {'fall':>6s} {'effector':>9s} {'root':>6s} {'heading':>8s} {'worst':>7s} {'len':>6s}  where")
-    for name in wanted:
-        m = measure(run, names.index(name), args.envs, args.steps)
+    for skill in wanted:
+        name, m = run.skill_names[skill], measure(run, skill, args.envs, args.steps)
         print(
             f"{name:12s} {m['fall']:6.1f} {m['effector']:9.1f} {m['root']:6.1f} {m['heading']:8.1f} "
             f"{m['worst']:>7s} {m['len']:6.1f}  {m['where']}"

@@ -6,6 +6,8 @@ from __future__ import annotations
 import subprocess
 import sys
 
+import pytest
+
 from charctl.experiments.cgail.rollouts import load_eval_run
 
 from conftest import REPO, load_script
@@ -24,11 +26,20 @@ def test_a_full_stride_walk_moves_its_closest_frame_along_the_clip():
     assert windowed["pose_ends_per_1k"] == 0.0 and 0.5 < windowed["r_track"] <= 1.0
 
 
-def test_a_skill_without_a_heading_goal_is_a_one_line_error():
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (
+            ["--skill", "right_kick"],
+            "error: skill 'right_kick' has no heading goal (it is scored against its timed frame)",
+        ),
+        (["--skill", "kick"], f"error: unknown skill 'kick' for {RUN}; its skills are walk, run, right_kick"),
+        (["--window", "0"], "error: --envs, --steps and --window must be >= 1"),
+    ],
+)
+def test_bad_arguments_are_one_line_errors(args, message):
     res = subprocess.run(
-        [sys.executable, str(REPO / "scripts/diag_goal_reference.py"), str(RUN), "--skill", "right_kick"],
-        capture_output=True,
-        text=True,
+        [sys.executable, str(REPO / "scripts/diag_goal_reference.py"), str(RUN), *args], capture_output=True, text=True
     )
     assert res.returncode != 0 and "Traceback" not in res.stderr
-    assert res.stderr.strip() == "error: skill 'right_kick' has no heading goal (it is scored against its timed frame)"
+    assert res.stderr.strip() == message

@@ -44,4 +44,4 @@ def test_an_unknown_skill_is_a_one_line_error():
         text=True,
     )
     assert res.returncode != 0 and "Traceback" not in res.stderr
-    assert res.stderr.strip() == "error: kick not among this run's skills (walk, run, right_kick)"
+    assert res.stderr.strip() == f"error: unknown skill 'kick' for {RUN}; its skills are walk, run, right_kick"

@@ -3,8 +3,8 @@
 `CgailEnv` / `CgailDeviceEnv` take these as keyword arguments; training (`train.CgailLearner`) and the
 diagnostic scripts that replay a run under its training rules (`scripts/diag_terminations.py`,
 `scripts/diag_goal_reference.py`) build them here, so a new termination or reference knob is wired once.
-Evaluation envs (`policy.TrainedRun.make_env`, `fidelity`) take none of them: they judge a policy by its
-falls only.
+Evaluation envs (`policy.TrainedRun.make_env` without `rules`, `fidelity`) take none of them: they judge a
+policy by its falls only; the diagnostic scripts pass these to `make_env`.
 """
 
 from __future__ import annotations

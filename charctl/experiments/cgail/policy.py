@@ -41,17 +41,15 @@ class TrainedRun:
             )
         return self.skill_names.index(name)
 
-    def make_env(self, num_envs: int, seed: int = 0, **env_overrides) -> CgailEnv:
+    def make_env(self, num_envs: int, seed: int = 0, rules: dict | None = None, **env_overrides) -> CgailEnv:
+        """A CPU env of the run's skills and `env` config (`env_overrides` replacing keys). Evaluation passes no
+        `rules` and judges a policy by its falls only; a diagnostic that replays the training rules passes
+        `env_rules.env_rules(cfg.reward, ...)`."""
         from omegaconf import OmegaConf
 
         env_cfg = OmegaConf.merge(self.cfg.env, {"num_envs": num_envs, **env_overrides})
-        return CgailEnv(
-            self.agent.skills,
-            env_cfg,
-            seed=seed,
-            conditional=self.agent.conditional,
-            tracking=self.cfg.reward.kind == "tracking",
-        )
+        rules = {"tracking": self.cfg.reward.kind == "tracking"} if rules is None else rules
+        return CgailEnv(self.agent.skills, env_cfg, seed=seed, conditional=self.agent.conditional, **rules)
 
     def mean_action(self, env: CgailEnv) -> np.ndarray:
         """(N, 28) mean actions of the policy on the env's current state (`drive.mean_action`), float64."""
