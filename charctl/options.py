@@ -28,6 +28,7 @@ NUMBER_RULES: dict[str, tuple[str, float]] = {
     "after": (">=", 0.0),
     "min_no_fall": (">=", 0.0),
     "min_diagonal": (">=", 0.0),
+    "min_coverage": (">=", 0.0),
     "seed": (">=", 0),
     "confirm_seed": (">=", 0),
 }
@@ -35,6 +36,7 @@ NUMBER_RULES: dict[str, tuple[str, float]] = {
 UPPER_RULES: dict[str, tuple[str, float]] = {
     "min_no_fall": ("<=", 1.0),  # shares in [0, 1]
     "min_diagonal": ("<=", 1.0),
+    "min_coverage": ("<=", 1.0),
 }
 _COMPARE = {">": operator.gt, ">=": operator.ge, "<": operator.lt, "<=": operator.le}
 # options that name a file charctl writes

@@ -213,6 +213,38 @@ def test_cgail_amp_run_is_ranked_by_fidelity_and_refuses_the_classifier_options(
         assert_one_line(exc.value, "AMP (unconditional)", flag)
     ev = checkpoints([str(run)], {}, [])
     assert not ev.conditional and ev.rank == "fidelity" and ev.fidelity
-    amp_row = {"min_coverage": 0.5, "worst_no_fall": 0.75, "min_diagonal": None}
-    assert ev.rank_key(amp_row) == (0.5, 0.75)
+    amp_row = {"min_coverage": 0.5, "worst_no_fall": 0.75, "min_diagonal": None, "fidelity": {"coverage": {"w": 0.5}}}
+    assert ev.rank_key(amp_row) == (1, 0.5, 0.75)
     assert sorted(p.name for p in tmp_path.rglob("*")) == ["amp", "config.yaml"]
+
+
+def test_cgail_fidelity_rank_counts_the_skills_at_the_coverage_target_first(tmp_path):
+    """By hand: A has two of three skills at coverage >= 0.5 (lowest 0.10), B one (lowest 0.20). The fidelity rank
+    picks A (2 > 1) where the lowest coverage alone would pick B; with --min-coverage 0.7 A counts one skill,
+    B none; equal counts fall to the lowest coverage, then the worst no-fall, then the diagonal."""
+    from charctl.experiments.cgail.eval_checkpoints import checkpoints, rank_key
+
+    def row(coverage, no_fall=0.9, diagonal=0.95):
+        cov = dict(zip(("walk", "kick", "spin"), coverage))
+        return {
+            "fidelity": {"coverage": cov},
+            "min_coverage": min(coverage),
+            "worst_no_fall": no_fall,
+            "min_diagonal": diagonal,
+        }
+
+    a, b = row([0.9, 0.6, 0.1]), row([0.55, 0.45, 0.2])
+    assert rank_key(a, "fidelity") == (2, 0.1, 0.9, 0.95) and rank_key(b, "fidelity") == (1, 0.2, 0.9, 0.95)
+    assert max((a, b), key=lambda r: rank_key(r, "fidelity")) is a
+    assert rank_key(a, "fidelity", 0.7)[0] == 1 and rank_key(b, "fidelity", 0.7)[0] == 0
+    assert (
+        max((row([0.5, 0.1, 0.3]), row([0.5, 0.2, 0.0])), key=lambda r: rank_key(r, "fidelity"))["min_coverage"] == 0.1
+    )
+    run = tmp_path / "cgail"
+    run.mkdir()
+    (run / "config.yaml").write_text("experiment: cgail\n")
+    assert checkpoints([str(run)], {"min_coverage": 0.6}, []).min_coverage == 0.6
+    with pytest.raises(CharctlError) as exc:
+        checkpoints([str(run)], {"rank": "margin", "min_coverage": 0.6}, [])
+    assert_one_line(exc.value, "--min-coverage", "--rank fidelity")
+    assert sorted(p.name for p in tmp_path.rglob("*")) == ["cgail", "config.yaml"]

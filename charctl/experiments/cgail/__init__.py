@@ -65,8 +65,9 @@ EXPERIMENT = Experiment(
         ),
         Option(
             "rank",
-            "with --checkpoints: fidelity (default: the largest lowest pose coverage over the skills, then the worst "
-            "no-fall, then the lowest diagonal; implies --fidelity) or margin (the largest margin over both targets)",
+            "with --checkpoints: fidelity (default: the most skills at pose coverage >= --min-coverage, then the "
+            "largest lowest coverage, the worst no-fall, the lowest diagonal; implies --fidelity) or margin (the "
+            "largest margin over both targets)",
             str,
             metavar="fidelity|margin",
             requires="checkpoints",
@@ -81,6 +82,12 @@ EXPERIMENT = Experiment(
             "fidelity_k", "with --checkpoints: episodes per skill for fidelity (default 4)", int, requires="checkpoints"
         ),
         Option("min_no_fall", "with --checkpoints: the no-fall target (default 0.8)", float, requires="checkpoints"),
+        Option(
+            "min_coverage",
+            "with --checkpoints --rank fidelity: the pose coverage a skill must reach to count (default 0.5)",
+            float,
+            requires="checkpoints",
+        ),
         Option("min_diagonal", "with --checkpoints: the diagonal target (default 0.9)", float, requires="checkpoints"),
         AFTER,
         SEED,

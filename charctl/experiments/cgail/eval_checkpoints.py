@@ -4,7 +4,7 @@ starts: charctl/commands/eval_checkpoints.py).
 
     charctl eval RUN --checkpoints [--survival 5] [-k 64] [--confusion-k 16] [--min-no-fall 0.8]
         [--min-diagonal 0.9] [--seed 4321] [--confirm-seed 7] [--after N] [--fidelity] [--fidelity-k 4]
-        [--rank fidelity|margin] [-o DIR] [device=cpu|cuda]
+        [--rank fidelity|margin] [--min-coverage 0.5] [-o DIR] [device=cpu|cuda]
 
 For each checkpoints/samples_<n>.pt (and last.pt) it runs what `charctl eval RUN --checkpoint F
 --survival SECONDS -k K` and `--confusion -k CK` run, into OUT/<checkpoint>/ (OUT: -o, default RUN/eval/),
@@ -21,8 +21,11 @@ DTW body-position error and the signature per skill, without the filmstrips; the
 re-evaluation draws them): the table gains the lowest coverage over the skills and a coverage per
 skill, the plot a line.
 
-Selection: `--rank fidelity` (the default; implies `--fidelity`): the largest lowest-coverage over the
-skills, ties broken by the worst no-fall, then the lowest diagonal. `--rank margin`: the checkpoint
+Selection: `--rank fidelity` (the default; implies `--fidelity`): the most skills at pose coverage >=
+`--min-coverage` (default 0.5, the ten-skill target), ties broken by the largest lowest-coverage over the
+skills, then the worst no-fall, then the lowest diagonal. (Until 2026-12-05 the lowest coverage came first:
+with one skill stuck at the same coverage in every checkpoint, as the ten-skill runs' spindance, that key
+told nothing apart and the worst no-fall picked.) `--rank margin`: the checkpoint
 that meets both targets with the largest margin (the smaller of worst no-fall - min_no_fall and min
 diagonal - min_diagonal), else the one closest to meeting them. Each checkpoint's result is kept in
 OUT/<checkpoint>/row.json and reused while its settings match. Policies run on the CPU unless a
@@ -49,6 +52,7 @@ CONFUSION_EPISODES = 16
 FIDELITY_EPISODES = 4
 MIN_NO_FALL = 0.8
 MIN_DIAGONAL = 0.9
+MIN_COVERAGE = 0.5  # --rank fidelity counts the skills at pose coverage >= this (issue 24's ten-skill target)
 SEED = 4321
 CONFIRM_SEED = 7
 OTHER_MODES = ("dtw", "confusion", "switch", "curves")  # modes --checkpoints does not combine with
@@ -60,10 +64,15 @@ def margin(worst_no_fall: float, min_diagonal: float, min_no_fall: float, min_di
     return min(worst_no_fall - min_no_fall, min_diagonal - min_diag)
 
 
-def rank_key(row: dict, rank: str) -> tuple:
+def skills_at_coverage(row: dict, min_coverage: float) -> int:
+    """How many skills of a checkpoint's row reach pose coverage `min_coverage` (a share in [0, 1])."""
+    return sum(c >= min_coverage for c in row["fidelity"]["coverage"].values())
+
+
+def rank_key(row: dict, rank: str, min_coverage: float = MIN_COVERAGE) -> tuple:
     """Sort key of a checkpoint's row (larger is better) under selection rule `rank` (see the module doc)."""
     if rank == "fidelity":
-        key = (row["min_coverage"], row["worst_no_fall"])
+        key = (skills_at_coverage(row, min_coverage), row["min_coverage"], row["worst_no_fall"])
         return key if row["min_diagonal"] is None else (*key, row["min_diagonal"])  # None: an AMP run
     return (row["margin"],)
 
@@ -194,13 +203,13 @@ def _report_head(run_dir: Path, skills: list[str], a, fid: bool) -> list[str]:
             "comparison. The diagonal runs start at frame 0 with mean actions, so they are the same on every "
             "evaluation."
         )
-        rule = "min coverage, then worst no-fall, then min diagonal." if a.rank == "fidelity" else "margin."
+        rule = f"{_most(a)}, then worst no-fall, then min diagonal." if a.rank == "fidelity" else "margin."
     else:
         measured = (
             f"no-fall: {a.k} episodes of {a.seconds:g} s per skill. Target: no-fall >= {a.min_no_fall}. An AMP "
             "(unconditional) run has no classifier: no Fig 6.8 diagonal, no argmax accuracy."
         )
-        rule = "min coverage, then worst no-fall."
+        rule = f"{_most(a)}, then worst no-fall."
     coverage = (
         f" Coverage: `charctl eval RUN --fidelity -k {a.fidelity_k}` (share of the clip's frames the policy "
         'matches within 0.15 m at every body, docs/cgail.md "Fidelity"); min coverage: the lowest over the '
@@ -210,12 +219,18 @@ def _report_head(run_dir: Path, skills: list[str], a, fid: bool) -> list[str]:
     return [title, "", measured + (coverage if fid else ""), "Selection: the largest " + rule, ""]
 
 
+def _most(a) -> str:
+    """The fidelity rule's first keys, in words."""
+    return f"number of skills at coverage >= {a.min_coverage:g}, then min coverage"
+
+
 def _report_table(rows: list[dict], skills: list[str], a, fid: bool) -> str:
     """checkpoints.md's table: one row per checkpoint, one column per skill (min coverage with `fid`)."""
     cond = bool(a.conditional)
     header = ["samples", "worst no-fall", *(["min diagonal", "min argmax acc."] if cond else [])]
-    header += [*(["min coverage"] if fid else []), *(["meets both"] if cond else []), *skills]
-    align = "r" * (2 + 2 * cond + fid) + "-" * (cond + len(skills))
+    header += [*([f"skills at coverage >= {a.min_coverage:g}", "min coverage"] if fid else [])]
+    header += [*(["meets both"] if cond else []), *skills]
+    align = "r" * (2 + 2 * cond + 2 * fid) + "-" * (cond + len(skills))
     return markdown_grid(header, [_report_row(r, skills, a, fid) for r in rows], align=align)
 
 
@@ -236,7 +251,7 @@ def _report_row(r: dict, skills: list[str], a, fid: bool) -> list[str]:
     summary = [f"{r['samples']:,}", f"{r['worst_no_fall']:.3f}"]
     if cond:
         summary += [f"{r['min_diagonal']:.3f}", f"{r['min_class_acc']:.3f}"]
-    summary += [f"{r['min_coverage']:.3f}"] if fid else []
+    summary += [str(skills_at_coverage(r, a.min_coverage)), f"{r['min_coverage']:.3f}"] if fid else []
     if cond:
         ok = r["worst_no_fall"] >= a.min_no_fall and r["min_diagonal"] >= a.min_diagonal
         summary.append("yes" if ok else "no")
@@ -296,6 +311,7 @@ class CgailCheckpoints:
     min_diagonal: float
     rank: str
     seed: int
+    min_coverage: float
     confirm_seed: int
     conditional: bool = True  # False: an AMP run (no classifier, no diagonal)
     samples_key: str = "samples"  # the sample count in a checkpoint's state
@@ -325,7 +341,7 @@ class CgailCheckpoints:
         return row
 
     def rank_key(self, row: dict) -> tuple:
-        return rank_key(row, self.rank)
+        return rank_key(row, self.rank, self.min_coverage)
 
     def write_report(self, rows: list[dict], chosen: dict, confirm: dict | None) -> str:
         return write_report(self.run_dir, rows, chosen, confirm, self)
@@ -352,6 +368,8 @@ def checkpoints(targets: list[str], options: dict, overrides: list[str]) -> Cgai
     rank = options.get("rank") or RANKS[0]
     if rank not in RANKS:
         raise CharctlError(f"--rank takes {' or '.join(RANKS)}, got {rank!r}")
+    if rank != "fidelity" and options.get("min_coverage") is not None:
+        raise CharctlError("--min-coverage is a rule of --rank fidelity; --rank margin does not count coverage")
     fidelity = bool(options.get("fidelity")) or rank == "fidelity"
     if fidelity:
         from charctl.experiments.cgail.fidelity import check_can_render
@@ -374,6 +392,7 @@ def checkpoints(targets: list[str], options: dict, overrides: list[str]) -> Cgai
         min_diagonal=float(pick("min_diagonal", MIN_DIAGONAL)),
         rank=rank,
         seed=int(pick("seed", SEED)),
+        min_coverage=float(pick("min_coverage", MIN_COVERAGE)),
         confirm_seed=int(pick("confirm_seed", CONFIRM_SEED)),
         conditional=conditional,
     )
