@@ -71,6 +71,14 @@ class EnvConfig:
     skill_fall_weight: float = 0.0
     # episodes of a skill after which its fall-rate estimate has half forgotten
     skill_fall_halflife: float = ranged(200.0, gt=0)
+    # Failure-weighted start frames (charctl.experiments.cgail.start_frames; docs/cgail.md, "Spindance"): this
+    # share of the RSI starts is drawn in proportion to the recent failures (falls and pose-error ends) in the
+    # start_failure_lead reference frames from each start frame on, per skill, so episodes begin shortly before
+    # where they tend to end; the rest uniformly. 0 = uniform RSI (the paper). Needs a timed reference
+    # (env.phase_obs, reward.pose_error_threshold > 0 or reward.kind=tracking).
+    start_failure_weight: float = ranged(0.0, ge=0, le=1)
+    start_failure_lead: int = ranged(10, ge=0)  # control frames (0.33 s at 30 Hz)
+    start_failure_halflife: float = ranged(300.0, gt=0)  # control steps after which the failure counts have halved
     action_scale: float = ranged(1.0, gt=0)  # PD target (rad) = rest pose + action_scale * action
     fall_tolerance: float = ranged(0.005, ge=0)  # m: a non-foot body this close to the ground ends the episode (a fall)
     goal_max_angle_deg: float = 45.0  # new heading goals lie within +- this angle of the current heading
@@ -307,7 +315,8 @@ def _check_disc(cfg) -> str | None:
 
 
 def _check_env(cfg) -> str | None:
-    """Physics and control rates and fall-weighted commands (skill_fall_halflife's range is declared on the field)."""
+    """Physics and control rates, fall-weighted commands and failure-weighted start frames (the ranges are declared
+    on the fields)."""
     env = cfg.env
     ratio = env.physics_hz / env.control_hz
     if abs(ratio - round(ratio)) > 1e-6:
@@ -315,6 +324,12 @@ def _check_env(cfg) -> str | None:
     # kept as code, not ranged(): tests/test_cgail.py matches this "must lie in" wording
     if not 0.0 <= env.skill_fall_weight <= 1.0:
         return f"env.skill_fall_weight must lie in [0, 1], got {env.skill_fall_weight}"
+    timed = env.phase_obs or cfg.reward.pose_error_threshold > 0 or cfg.reward.kind == "tracking"
+    if env.start_failure_weight > 0 and not timed:
+        return (
+            "env.start_failure_weight needs a timed reference to place failures in the clip: env.phase_obs=true, "
+            "reward.pose_error_threshold > 0 or reward.kind=tracking"
+        )
     return None
 
 

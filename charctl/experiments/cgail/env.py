@@ -19,6 +19,7 @@ from __future__ import annotations
 import numpy as np
 
 from charctl.config import plain_section
+from charctl.experiments.cgail import start_frames
 from charctl.experiments.cgail.features import (
     DISC_OBS_DIM,
     disc_obs,
@@ -104,6 +105,10 @@ class CgailEnv:
         self.fall_count = 0
         # per-skill recent failure rate: falls and pose-error ends (env.skill_fall_weight)
         self.fall_rate = np.full(self.K, 0.5)
+        # env.start_failure_weight: failures per skill and reference frame, and each start frame's lead window
+        self.frame_failures = np.zeros((self.K, int(self.clip_frames.max())))
+        self.rsi_frames = np.array([len(sk.qpos) for sk in skills])
+        self._lead = start_frames.lead_window_index(self.clip_frames, self.clip_loops, self.cfg.start_failure_lead)
         self._state = np.zeros((self.N, self.state_dim))
         self._obs = np.zeros((self.N, DISC_OBS_DIM))
         self.reset(np.arange(self.N))
@@ -170,10 +175,13 @@ class CgailEnv:
         self.yaw_err[ids] = 0.0
         qpos = np.empty((len(ids), self.sim.layout.nq))
         qvel = np.empty((len(ids), self.sim.layout.nv))
+        weighted = self._failure_weighted_frames(skill)
         for k in np.unique(skill):  # <= K groups, vectorised inside
             m = skill == k
             data = self.skills[k]
-            frames = self.rng.integers(0, len(data.qpos) - 1, size=int(m.sum()))
+            frames = (
+                weighted[m] if weighted is not None else self.rng.integers(0, len(data.qpos) - 1, size=int(m.sum()))
+            )
             if self.start_frame is not None:
                 frames[:] = min(self.start_frame, len(data.qpos) - 1)
             qpos[m] = data.qpos[frames]
@@ -189,6 +197,15 @@ class CgailEnv:
         self._new_goal(ids)
         k = sim_kinematics(self.sim, ids)  # only the reset rows
         self._state[ids], self._obs[ids] = self._features(k, ids)
+
+    def _failure_weighted_frames(self, skill: np.ndarray) -> np.ndarray | None:
+        """(n,) start frames for envs commanded `skill` (n,) drawn by `start_frames` (env.start_failure_weight),
+        or None for uniform RSI (the weight 0: the random stream is then the one uniform RSI always drew)."""
+        weight = self.cfg.start_failure_weight
+        if weight <= 0:
+            return None
+        u = self.rng.random(len(skill))
+        return start_frames.draw_start_frames(self.frame_failures, self._lead, self.rsi_frames, weight, skill, u)
 
     # ------------------------------------------------------------------ observation
     def _goal_features(self, k, rows: np.ndarray | slice = slice(None)) -> np.ndarray:
@@ -310,6 +327,9 @@ class CgailEnv:
         self.steps += 1
         terminated, truncated = episode_end(fell, unstable, pose_ended, self.steps, self.max_steps, clip_ended)
         self.fall_count += int(fell.sum())
+        if self.cfg.start_failure_weight > 0:  # where in its clip each failing env was (before resets)
+            args = (self.cmd, self.ref_frame, terminated, self.cfg.start_failure_halflife)
+            self.frame_failures = start_frames.update_frame_failures(self.frame_failures, *args)
         done = np.flatnonzero(terminated | truncated)
         if done.size:
             # a pose-error termination counts as a failure of the skill, like a fall (env.skill_fall_weight)

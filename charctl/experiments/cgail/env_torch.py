@@ -27,6 +27,7 @@ import torch
 import torch.nn.functional as F
 
 from charctl.config import plain_section
+from charctl.experiments.cgail import start_frames
 from charctl.experiments.cgail.env_rows import IndexRows, MaskRows, pad_skill_tables
 from charctl.experiments.cgail.features import DISC_OBS_DIM, Kinematics, disc_obs, heading_frame, policy_state
 from charctl.experiments.cgail.rules import (
@@ -138,6 +139,8 @@ class CgailDeviceEnv:
         self.ref_grace = torch.zeros(self.N, **i64)  # pose-error check: steps left without a check
         self.yaw_err = torch.zeros(self.N, **f32)  # reward.yaw_error_threshold: heading gained on the reference (rad)
         self.fall_rate = torch.full((self.K,), 0.5, dtype=torch.float64, device=dev)  # env.skill_fall_weight
+        # env.start_failure_weight: failures per skill and reference frame (start_frames.py)
+        self.frame_failures = torch.zeros(self.K, int(self.clip_frames.max()), dtype=torch.float64, device=dev)
         self.forced_command: torch.Tensor | None = None  # evaluation: fixed command per env (-1 = random)
         self.start_frame: int | None = None
         self.random_yaw = True
@@ -159,6 +162,10 @@ class CgailDeviceEnv:
         self.clip_loops = torch.as_tensor([s.loop for s in skills], dtype=torch.bool, device=dev)
         self.has_goal = torch.as_tensor([s.heading_goal for s in skills], dtype=torch.bool, device=dev)
         self.speed = torch.as_tensor([s.mean_speed for s in skills], dtype=dt, device=dev)
+        lead = start_frames.lead_window_index(
+            [len(s.obs) for s in skills], [s.loop for s in skills], self.cfg.start_failure_lead
+        )
+        self._lead = tuple(torch.as_tensor(a, device=dev) for a in lead)  # each start frame's lead window
 
     # ------------------------------------------------------------------ random numbers
     def _rand(self) -> torch.Tensor:
@@ -210,6 +217,9 @@ class CgailDeviceEnv:
             skill = torch.where(forced >= 0, forced, skill)
         n_rsi = self.rsi_frames[skill]
         frames = torch.minimum(self._randint(n_rsi - 1), n_rsi - 2).clamp(min=0)  # [0, T - 1) as numpy's integers
+        if self.cfg.start_failure_weight > 0:  # a share drawn towards the frames where episodes end (start_frames.py)
+            weight, u = self.cfg.start_failure_weight, self._rand().double()
+            frames = start_frames.draw_start_frames(self.frame_failures, self._lead, self.rsi_frames, weight, skill, u)
         if self.start_frame is not None:
             frames = torch.minimum(torch.full_like(frames, int(self.start_frame)), n_rsi - 1)
         yaw = (
@@ -353,6 +363,9 @@ class CgailDeviceEnv:
         terminated, truncated = episode_end(fell, unstable, pose_ended, self.steps, self.max_steps, clip_ended)
         self._falls += fell.sum()
         done = terminated | truncated
+        if self.cfg.start_failure_weight > 0:  # where in its clip each failing env was (before resets)
+            args = (self.cmd, self.ref_frame, terminated, self.cfg.start_failure_halflife)
+            self.frame_failures = start_frames.update_frame_failures(self.frame_failures, *args)
         if self.cfg.skill_fall_weight > 0:  # a pose-error end counts as a failure of the skill, like a fall
             self.fall_rate = update_fall_rates(
                 self.fall_rate, self.cmd, done, fell | pose_ended, self.cfg.skill_fall_halflife

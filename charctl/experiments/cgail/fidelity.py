@@ -119,7 +119,8 @@ def _make_env(agent, num_envs: int, seed: int, episode_seconds: float):
     from charctl.experiments.cgail.env import CgailEnv
 
     env_cfg = OmegaConf.merge(
-        agent.cfg.env, {"num_envs": num_envs, "switch_prob": 0.0, "episode_seconds": episode_seconds}
+        agent.cfg.env,
+        {"num_envs": num_envs, "switch_prob": 0.0, "episode_seconds": episode_seconds, "start_failure_weight": 0.0},
     )
     env = CgailEnv(
         agent.skills,

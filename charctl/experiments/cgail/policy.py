@@ -47,7 +47,8 @@ class TrainedRun:
         `env_rules.env_rules(cfg.reward, ...)`."""
         from omegaconf import OmegaConf
 
-        env_cfg = OmegaConf.merge(self.cfg.env, {"num_envs": num_envs, **env_overrides})
+        evaluation = {"start_failure_weight": 0.0} if rules is None else {}  # uniform RSI: a training rule
+        env_cfg = OmegaConf.merge(self.cfg.env, {"num_envs": num_envs, **evaluation, **env_overrides})
         rules = {"tracking": self.cfg.reward.kind == "tracking"} if rules is None else rules
         return CgailEnv(self.agent.skills, env_cfg, seed=seed, conditional=self.agent.conditional, **rules)
 
