@@ -1,12 +1,8 @@
 """The cgail environment in torch: `CgailEnv`'s rules on MuJoCo Warp (env.backend=warp) or, on the CPU, over
 C MuJoCo's arrays seen as tensors (env.backend=torch, `charctl.sim.torch_view.TorchBatchedHumanoid`).
 
-Same episode logic as `env.CgailEnv` (docs/cgail.md): the commanded skill B, the previous one A and
-the ramp weight w (eq 4.10), heading goals for locomotion skills, reference-state initialisation
-(RSI) from a random frame of the commanded clip turned by a random yaw and moved to the origin,
-the tracking baseline's reference phase, the timed reference of the pose-error check, `reward.w_track`
-and env.phase_obs, fall-weighted commands, episode ends on a fall / a blow-up / a large pose error /
-the time limit. The rules themselves are `features.py` and `rules.py`, shared with the CPU env.
+Same episode logic as `env.CgailEnv` (docs/cgail.md); the rules themselves are `features.py`, `rules.py` and
+`start_frames.py`, shared with the CPU env.
 Every per-env quantity is a tensor on the simulation device and every branch that depends on
 data is a mask (`torch.where`), so a control step issues no host round trip: resets run for a
 (possibly all-false) mask each step, with RSI candidates drawn for every env and written only
@@ -140,7 +136,9 @@ class CgailDeviceEnv:
         self.yaw_err = torch.zeros(self.N, **f32)  # reward.yaw_error_threshold: heading gained on the reference (rad)
         self.fall_rate = torch.full((self.K,), 0.5, dtype=torch.float64, device=dev)  # env.skill_fall_weight
         # env.start_failure_weight: failures per skill and reference frame (start_frames.py)
-        self.frame_failures = torch.zeros(self.K, int(self.clip_frames.max()), dtype=torch.float64, device=dev)
+        self.frame_failures = torch.zeros(
+            self.K, int(self.clip_frames.max()), dtype=torch.float64, device=dev
+        )  # by frame
         self.forced_command: torch.Tensor | None = None  # evaluation: fixed command per env (-1 = random)
         self.start_frame: int | None = None
         self.random_yaw = True
@@ -163,7 +161,7 @@ class CgailDeviceEnv:
         self.has_goal = torch.as_tensor([s.heading_goal for s in skills], dtype=torch.bool, device=dev)
         self.speed = torch.as_tensor([s.mean_speed for s in skills], dtype=dt, device=dev)
         lead = start_frames.lead_window_index(
-            [len(s.obs) for s in skills], [s.loop for s in skills], self.cfg.start_failure_lead
+            self.clip_frames.cpu(), self.clip_loops.cpu(), self.cfg.start_failure_lead
         )
         self._lead = tuple(torch.as_tensor(a, device=dev) for a in lead)  # each start frame's lead window
 

@@ -23,9 +23,8 @@ skill, the plot a line.
 
 Selection: `--rank fidelity` (the default; implies `--fidelity`): the most skills at pose coverage >=
 `--min-coverage` (default 0.5, the ten-skill target), ties broken by the largest lowest-coverage over the
-skills, then the worst no-fall, then the lowest diagonal. (Until 2026-12-04 the lowest coverage came first:
-with one skill stuck at the same coverage in every checkpoint, as the ten-skill runs' spindance, that key
-told nothing apart and the worst no-fall picked.) `--rank margin`: the checkpoint
+skills, then the worst no-fall, then the lowest diagonal (why the count first: docs/cgail.md, "Fidelity").
+`--rank margin`: the checkpoint
 that meets both targets with the largest margin (the smaller of worst no-fall - min_no_fall and min
 diagonal - min_diagonal), else the one closest to meeting them. Each checkpoint's result is kept in
 OUT/<checkpoint>/row.json and reused while its settings match. Policies run on the CPU unless a
