@@ -327,8 +327,8 @@ class CgailEnv:
         self.steps += 1
         terminated, truncated = episode_end(fell, unstable, pose_ended, self.steps, self.max_steps, clip_ended)
         self.fall_count += int(fell.sum())
-        if self.cfg.start_failure_weight > 0:  # where in its clip each failing env was (before resets)
-            args = (self.cmd, self.ref_frame, terminated, self.cfg.start_failure_halflife)
+        if self.cfg.start_failure_weight > 0:  # where in its clip each failing env was (not during a command ramp)
+            args = (self.cmd, self.ref_frame, terminated & self.ref_active, self.cfg.start_failure_halflife)
             self.frame_failures = start_frames.update_frame_failures(self.frame_failures, *args)
         done = np.flatnonzero(terminated | truncated)
         if done.size:

@@ -361,8 +361,8 @@ class CgailDeviceEnv:
         terminated, truncated = episode_end(fell, unstable, pose_ended, self.steps, self.max_steps, clip_ended)
         self._falls += fell.sum()
         done = terminated | truncated
-        if self.cfg.start_failure_weight > 0:  # where in its clip each failing env was (before resets)
-            args = (self.cmd, self.ref_frame, terminated, self.cfg.start_failure_halflife)
+        if self.cfg.start_failure_weight > 0:  # where in its clip each failing env was (not during a command ramp)
+            args = (self.cmd, self.ref_frame, terminated & self.ref_active, self.cfg.start_failure_halflife)
             self.frame_failures = start_frames.update_frame_failures(self.frame_failures, *args)
         if self.cfg.skill_fall_weight > 0:  # a pose-error end counts as a failure of the skill, like a fall
             self.fall_rate = update_fall_rates(
