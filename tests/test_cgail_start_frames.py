@@ -146,3 +146,13 @@ def test_evaluation_envs_start_uniformly_whatever_the_training_weight():
     assert tr.make_env(2).cfg.start_failure_weight == 0.0
     assert _make_env(tr.agent, 2, 0, 1.0).cfg.start_failure_weight == 0.0
     assert tr.make_env(2, rules=env_rules(tr.cfg.reward)).cfg.start_failure_weight == 0.5
+
+
+@pytest.mark.parametrize("backend", ["cpu", "torch"])
+def test_smoke_training_with_failure_weighted_starts(backend, tmp_path, charctl_main):
+    res = charctl_main(
+        "train", "cgail", "scale=smoke", "env.start_failure_weight=0.5", "env.phase_obs=true",
+        f"env.backend={backend}", "device=cpu", f"output_root={tmp_path}",
+    )  # fmt: skip
+    assert res.returncode == 0, res.stderr
+    assert "done: iterations=4" in res.stdout
