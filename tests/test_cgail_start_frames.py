@@ -52,9 +52,7 @@ def test_start_frames_are_drawn_just_before_the_failures(lib):
     np.testing.assert_allclose(p, [[0, 0, 0, third, third, third, 0], [third, 0, third, third, 0, 0, 0]])
     p = np.diff(np.asarray(SF.start_frame_cdf(arr(counts), *lead, arr(FRAMES), 0.5)), axis=1, prepend=0.0)
     np.testing.assert_allclose(p[0], 0.5 * np.array([0, 0, 0, third, third, third, 0]) + 0.5 * np.r_[np.ones(6) / 6, 0])
-    none = np.diff(
-        np.asarray(SF.start_frame_cdf(arr(np.zeros((2, 7))), *lead, arr(FRAMES), 1.0)), axis=1, prepend=0
-    )
+    none = np.diff(np.asarray(SF.start_frame_cdf(arr(np.zeros((2, 7))), *lead, arr(FRAMES), 1.0)), axis=1, prepend=0)
     np.testing.assert_allclose(none[1], [0.25] * 4 + [0] * 3)  # no failures on record: uniform
 
 
