@@ -21,11 +21,11 @@ import math
 
 import torch
 import torch.nn.functional as F
-from torch import Tensor
 
 from charctl.config import plain_section
 from charctl.experiments.cgail import start_frames
 from charctl.experiments.cgail.env_rows import IndexRows, MaskRows, pad_skill_tables
+from charctl.experiments.cgail.env_rules import env_reference_check
 from charctl.experiments.cgail.features import DISC_OBS_DIM, Kinematics, disc_obs, heading_frame, policy_state
 from charctl.experiments.cgail.rules import (
     advance_ramp,
@@ -38,7 +38,6 @@ from charctl.experiments.cgail.rules import (
     phase_features,
     pose_key_error_frames,
     pose_keys,
-    reference_check,
     reference_pose_error,
     restart_after_ramp,
     root_height_scale,
@@ -300,20 +299,6 @@ class CgailDeviceEnv:
         closest = each.gather(1, best[:, None])[:, 0]
         return rows.put(timed, closest), rows.put(ref, self.ref_obs[cmd, best])
 
-    def _check_reference(
-        self, pair_next: Tensor, ref: Tensor, r_track: Tensor, fell: Tensor, unstable: Tensor
-    ) -> tuple[Tensor, Tensor, Tensor]:
-        """The pose-error check of one step (reward.pose_error_threshold, `rules.reference_check`): (r_track with the
-        tracking reward where the reference is checked, (N,) bool ended by the check, (N, 133) the reference each
-        env was scored against); updates the heading error."""
-        err, scored = self._pose_error(pair_next, ref)
-        per_env = (self.yaw_err, self.ref_active, self.ref_grace, self.has_goal[self.cmd], fell, unstable)
-        rule = dict(threshold=self.pose_threshold, yaw_error_scale=self.yaw_scale, dt=1.0 / self.cfg.control_hz)
-        r_track, pose_ended, _, self.yaw_err = reference_check(
-            err, scored, pair_next, ref, r_track, *per_env, **rule, reference_reward=self.reference_reward
-        )
-        return r_track, pose_ended, scored
-
     def _restart_reference_after_ramp(self) -> None:
         """Envs whose command ramp has just finished: the new clip's reference starts at frame 0."""
         self.ref_frame, self.ref_grace, self.ref_active = restart_after_ramp(
@@ -354,7 +339,7 @@ class CgailDeviceEnv:
         fell = self.sim.non_foot_ground_contact(self.cfg.fall_tolerance)
         pose_ended, scored = no_pose_end, None
         if self.pose_threshold > 0:
-            r_track, pose_ended, scored = self._check_reference(pair_next, ref, r_track, fell, unstable)
+            r_track, pose_ended, scored = env_reference_check(self, pair_next, ref, r_track, fell, unstable)
         self.steps = self.steps + 1
         terminated, truncated = episode_end(fell, unstable, pose_ended, self.steps, self.max_steps, clip_ended)
         self._falls += fell.sum()
