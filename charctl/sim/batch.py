@@ -33,6 +33,18 @@ class SimSettings:
     max_speed: float = 200.0  # |qvel| above this (m/s, rad/s) counts as a blow-up
     friction: float = 1.0
     armature: float = JOINT_ARMATURE  # kg m^2 per hinge (charctl.sim.JOINT_ARMATURE)
+    shoulder_frame: str = "parent"  # the shoulders' hinge-chain frames (charctl.sim.humanoid.SHOULDER_FRAMES)
+
+    @classmethod
+    def of(cls, cfg) -> SimSettings:
+        """The settings an experiment's config section states (physics_hz, control_hz, armature, shoulder_frame;
+        cgail's `env`); the rest at their defaults."""
+        return cls(
+            physics_hz=cfg.physics_hz,
+            control_hz=cfg.control_hz,
+            armature=cfg.armature,
+            shoulder_frame=cfg.shoulder_frame,
+        )
 
 
 class BatchedHumanoid:
@@ -49,7 +61,7 @@ class BatchedHumanoid:
         if abs(ratio - round(ratio)) > 1e-6 or ratio < 1:
             raise ValueError(f"physics_hz ({s.physics_hz}) must be a whole multiple of control_hz ({s.control_hz})")
         self.substeps = int(round(ratio))
-        self.model = load_model(s.physics_hz, s.friction, s.armature)
+        self.model = load_model(s.physics_hz, s.friction, s.armature, s.shoulder_frame)
         self.num_envs = num_envs
         self.batch = mujoco.batch.Batch(self.model, nsim=num_envs, nthread=s.nthread)
         self._stage_vel = int(mujoco.mjtStage.mjSTAGE_VEL)

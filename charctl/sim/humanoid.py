@@ -54,7 +54,29 @@ PD_GAINS: dict[str, tuple[float, float, float]] = {
     "elbow": (300.0, 30.0, 60.0),
 }
 HINGE_LIMITS = {"knee": (-3.14, 0.0), "elbow": (0.0, 3.14)}
-_AXES = {"X": "1 0 0", "Y": "0 1 0", "Z": "0 0 1"}
+_AXES = {"X": np.eye(3)[0], "Y": np.eye(3)[1], "Z": np.eye(3)[2]}
+# The frame R0 (xyzw) each shoulder's hinge chain works in, per `shoulder_frame` variant: the joint's rotation
+# is R0 E(angles) R0^-1, so its hinge axes are R0's columns and the rest pose is unchanged.
+# - "parent" (every policy trained up to 2026-12-04): the parent's axes. There the dance_a clip (the `spindance`
+#   skill) swings the right arm 10 deg from the XYZ chain's singular pose (middle angle -80 deg): its first and
+#   third hinges turn at 20-25 rad/s and wind a full turn per loop.
+# - "rotated": per shoulder, the best of 4,001 frames (identity and 4,000 random, seed 1) at keeping the middle
+#   angle away from +-90 deg over the ten paper skills' clips and mirrors: at most 53 (right) and 51 deg (left);
+#   dance_a's fastest hinge 11 rad/s. scripts/choose_shoulder_frames.py prints them; docs/cgail.md "Spindance".
+SHOULDER_FRAMES: dict[str, dict[str, tuple[float, float, float, float]]] = {
+    "parent": {},
+    "rotated": {
+        "right_shoulder": (0.2506, -0.5063, 0.1964, -0.8014),
+        "left_shoulder": (-0.3366, -0.7564, 0.2599, 0.4970),
+    },
+}
+
+
+def chain_frames(shoulder_frame: str) -> dict[str, Rotation]:
+    """body -> R0 of the hinge chains not in their parent's axes, for a `shoulder_frame` variant."""
+    if shoulder_frame not in SHOULDER_FRAMES:
+        raise ValueError(f"unknown shoulder_frame {shoulder_frame!r} (one of {', '.join(SHOULDER_FRAMES)})")
+    return {b: Rotation.from_quat(q) for b, q in SHOULDER_FRAMES[shoulder_frame].items()}
 
 
 def _kind(joint: str) -> str:
@@ -94,15 +116,17 @@ def build_mjcf(
     armature: float = JOINT_ARMATURE,
     skeleton: Skeleton | None = None,
     floor_size: float = 50.0,
+    shoulder_frame: str = "parent",
 ) -> str:
-    """MJCF text of the humanoid on a ground plane. Physics timestep = 1 / physics_hz."""
+    """MJCF text of the humanoid on a ground plane. Physics timestep = 1 / physics_hz; `shoulder_frame`: the
+    shoulders' hinge-chain frames (SHOULDER_FRAMES)."""
     skel = skeleton or load_skeleton()
     children: dict[int, list[int]] = {b: [] for b in range(skel.num_bodies)}
     for b in range(1, skel.num_bodies):
         children[int(skel.parents[b])].append(b)
     lines: list[str] = []
     actuators: list[str] = []
-    _emit_body(skel, children, 0, 0, lines, actuators)
+    _emit_body(skel, children, 0, 0, lines, actuators, chain_frames(shoulder_frame))
     return _mjcf_document("\n".join(lines), "\n    ".join(actuators), physics_hz, friction, armature, floor_size)
 
 
@@ -134,9 +158,12 @@ def _root_joint_xml(pad: str) -> list[str]:
     ]
 
 
-def _actuated_joint_xml(name: str, pad: str, lines: list[str], actuators: list[str]) -> None:
+def _actuated_joint_xml(
+    name: str, pad: str, lines: list[str], actuators: list[str], frame: Rotation | None = None
+) -> None:
     """Append body `name`'s hinge(s) to `lines` and their PD position actuators to `actuators`:
-    one limited hinge about z (radians) for knees/elbows, else a chain of three in EULER_ORDER."""
+    one limited hinge about z (radians) for knees/elbows, else a chain of three in EULER_ORDER, about the
+    axes of `frame` (R0; None: the parent's axes)."""
     kp, kd, lim = PD_GAINS[_kind(name)]
     if name in HINGE_JOINTS:
         lo, hi = HINGE_LIMITS[_kind(name)]
@@ -145,7 +172,8 @@ def _actuated_joint_xml(name: str, pad: str, lines: list[str], actuators: list[s
     else:
         for axis in EULER_ORDER[name]:
             jn = f"{name}_{axis.lower()}"
-            lines.append(f'{pad}  <joint name="{jn}" type="hinge" axis="{_AXES[axis]}"/>')
+            v = _AXES[axis] if frame is None else frame.apply(_AXES[axis])
+            lines.append(f'{pad}  <joint name="{jn}" type="hinge" axis="{v[0]:.12g} {v[1]:.12g} {v[2]:.12g}"/>')
             actuators.append(_actuator(jn, kp, kd, lim))
 
 
@@ -156,9 +184,11 @@ def _emit_body(
     depth: int,
     lines: list[str],
     actuators: list[str],
+    frames: dict[str, Rotation],
 ) -> None:
     """Append body `b`'s `<body>` element and, depth-first, its descendants' to `lines`; the root sits
-    0.9 m above the ground, every other body at its skeleton offset (metres) from its parent."""
+    0.9 m above the ground, every other body at its skeleton offset (metres) from its parent. `frames`:
+    chain_frames' R0 per body."""
     name = skel.names[b]
     pad = "  " * (depth + 2)
     off = skel.offsets[b] if b > 0 else np.array([0.0, 0.9, 0.0])
@@ -166,10 +196,10 @@ def _emit_body(
     if b == 0:
         lines.extend(_root_joint_xml(pad))
     elif not name.endswith("wrist"):
-        _actuated_joint_xml(name, pad, lines, actuators)
+        _actuated_joint_xml(name, pad, lines, actuators, frames.get(name))
     lines.append(f"{pad}  {_geom_xml(skel, b)}")
     for c in children[b]:
-        _emit_body(skel, children, c, depth + 1, lines, actuators)
+        _emit_body(skel, children, c, depth + 1, lines, actuators, frames)
     lines.append(f"{pad}</body>")
 
 
@@ -216,30 +246,40 @@ def _color(name: str) -> str:
 
 
 @functools.lru_cache(maxsize=8)
-def load_model(physics_hz: float = PHYSICS_HZ, friction: float = 1.0, armature: float = JOINT_ARMATURE):
+def load_model(
+    physics_hz: float = PHYSICS_HZ,
+    friction: float = 1.0,
+    armature: float = JOINT_ARMATURE,
+    shoulder_frame: str = "parent",
+):
     """Compiled MjModel (cached per settings). Heavy import inside."""
     import mujoco
 
     from charctl.mujoco_log import apply_mujoco_log
 
     apply_mujoco_log()  # warnings into the run's mujoco.log, never ./MUJOCO_LOG.TXT
-    return mujoco.MjModel.from_xml_string(build_mjcf(physics_hz, friction, armature))
+    return mujoco.MjModel.from_xml_string(build_mjcf(physics_hz, friction, armature, shoulder_frame=shoulder_frame))
 
 
 # ---------------------------------------------------------------------------- clip <-> qpos
-def local_rot_to_qpos(root_pos: np.ndarray, local_rot: np.ndarray) -> np.ndarray:
-    """(..., 3) root positions and (..., 15, 4) local rotations -> (..., nq) qpos."""
+def local_rot_to_qpos(root_pos: np.ndarray, local_rot: np.ndarray, shoulder_frame: str = "parent") -> np.ndarray:
+    """(..., 3) root positions and (..., 15, 4) local rotations -> (..., nq) qpos (hinge angles of the model
+    built with `shoulder_frame`)."""
     lay = layout()
     skel = load_skeleton()
     shape = local_rot.shape[:-2]
     qpos = np.zeros(shape + (lay.nq,))
     qpos[..., :3] = root_pos
     qpos[..., 3:7] = R.xyzw_to_wxyz(local_rot[..., 0, :])
+    frames = chain_frames(shoulder_frame)
     for order, bodies in _bodies_by_order().items():
         idx = [skel.index(b) for b in bodies]
         q = local_rot[..., idx, :].reshape(-1, 4)
         angles = Rotation.from_quat(q).as_euler(order).reshape(shape + (len(bodies), 3))
         for k, b in enumerate(bodies):
+            if b in frames:  # the chain's angles of R0^-1 R R0
+                r = Rotation.from_quat(local_rot[..., skel.index(b), :].reshape(-1, 4))
+                angles[..., k, :] = (frames[b].inv() * r * frames[b]).as_euler(order).reshape(shape + (3,))
             qpos[..., lay.qpos_slices[b]] = angles[..., k, :]
     for b in HINGE_JOINTS:
         q = local_rot[..., skel.index(b), :]
@@ -247,30 +287,36 @@ def local_rot_to_qpos(root_pos: np.ndarray, local_rot: np.ndarray) -> np.ndarray
     return qpos
 
 
-def qpos_to_local_rot(qpos: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(..., nq) qpos -> root positions (..., 3) and local rotations (..., 15, 4) xyzw."""
+def qpos_to_local_rot(qpos: np.ndarray, shoulder_frame: str = "parent") -> tuple[np.ndarray, np.ndarray]:
+    """(..., nq) qpos of the model built with `shoulder_frame` -> root positions (..., 3) and local rotations
+    (..., 15, 4) xyzw."""
     lay = layout()
     skel = load_skeleton()
     shape = qpos.shape[:-1]
     rot = np.tile(R.IDENTITY, shape + (skel.num_bodies, 1))
     rot[..., 0, :] = R.normalize(R.wxyz_to_xyzw(qpos[..., 3:7]))
+    frames = chain_frames(shoulder_frame)
     for order, bodies in _bodies_by_order().items():
         angles = np.stack([qpos[..., lay.qpos_slices[b]] for b in bodies], axis=-2)
         q = Rotation.from_euler(order, angles.reshape(-1, 3)).as_quat().reshape(shape + (len(bodies), 4))
         for k, b in enumerate(bodies):
+            if b in frames:  # R0 E R0^-1
+                e = Rotation.from_euler(order, angles[..., k, :].reshape(-1, 3))
+                q[..., k, :] = (frames[b] * e * frames[b].inv()).as_quat().reshape(shape + (4,))
             rot[..., skel.index(b), :] = q[..., k, :]
     for b in HINGE_JOINTS:
         rot[..., skel.index(b), :] = R.from_axis_angle(np.array([0.0, 0.0, 1.0]), qpos[..., lay.qpos_slices[b].start])
     return qpos[..., :3].copy(), rot
 
 
-def clip_to_qpos_qvel(clip) -> tuple[np.ndarray, np.ndarray]:
-    """Per-frame qpos (T, nq) and qvel (T, nv) of a clip (finite-difference velocities).
+def clip_to_qpos_qvel(clip, shoulder_frame: str = "parent") -> tuple[np.ndarray, np.ndarray]:
+    """Per-frame qpos (T, nq) and qvel (T, nv) of a clip (finite-difference velocities), for the model built
+    with `shoulder_frame`.
 
     qvel follows MuJoCo's conventions: free-joint linear velocity in the world frame, angular
     velocity in the root body frame; hinge rates from unwrapped angles.
     """
-    qpos = local_rot_to_qpos(clip.root_pos, clip.local_rot)
+    qpos = local_rot_to_qpos(clip.root_pos, clip.local_rot, shoulder_frame)
     lay = layout()
     qvel = np.zeros((clip.num_frames, lay.nv))
     qvel[:, :3] = clip.root_linear_velocity()

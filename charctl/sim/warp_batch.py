@@ -131,7 +131,8 @@ class WarpBatchedHumanoid:
         if self.device.type == "cuda" and self.device.index is None:
             self.device = torch.device(f"cuda:{self.wp_device.ordinal}")
         self.num_envs = num_envs
-        self.model = load_model(s.physics_hz, s.friction, s.armature)  # host MjModel (constants, geometry)
+        # host MjModel (constants, geometry)
+        self.model = load_model(s.physics_hz, s.friction, s.armature, s.shoulder_frame)
         mjd = mujoco.MjData(self.model)
         mujoco.mj_forward(self.model, mjd)
         self._mjw, self._wp = mjw, wp

@@ -90,6 +90,10 @@ class EnvConfig:
     # (0, 0) for skills with a heading goal (their reference is the closest frame) and during a command ramp.
     # false = the paper's state (command only). docs/cgail.md, "Run H".
     phase_obs: bool = False
+    # The shoulders' hinge-chain frames (charctl.sim.humanoid.SHOULDER_FRAMES): parent (the parent's axes; every
+    # policy trained up to 2026-12-04) | rotated (chains turned away from the clips' singular poses: spindance's
+    # right arm passes 10 deg from the parent-axes chain's, its hinges at 20-25 rad/s). docs/cgail.md "Spindance".
+    shoulder_frame: Annotated[str, Literal["parent", "rotated"]] = "parent"
     # cpu (C MuJoCo, numpy) | warp (MuJoCo Warp on `device`, README "GPU") | torch (C MuJoCo with the torch env
     # of the warp backend on the CPU, charctl.sim.torch_view; device=cpu) | auto (warp on CUDA)
     backend: Annotated[str, Literal["cpu", "warp", "torch", "auto"]] = "cpu"

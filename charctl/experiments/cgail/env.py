@@ -87,7 +87,7 @@ class CgailEnv:
         self.rng = np.random.default_rng(seed)
         self.sim = BatchedHumanoid(
             env_cfg.num_envs,
-            SimSettings(physics_hz=env_cfg.physics_hz, control_hz=env_cfg.control_hz, armature=env_cfg.armature),
+            SimSettings.of(env_cfg),
         )
         self.N = env_cfg.num_envs
         self.max_steps = int(round(env_cfg.episode_seconds * env_cfg.control_hz))

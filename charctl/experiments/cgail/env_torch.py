@@ -99,7 +99,7 @@ class CgailDeviceEnv:
         self.generator = torch.Generator(device=dev).manual_seed(int(seed))
         self.sim = sim or WarpBatchedHumanoid(
             self.N,
-            SimSettings(physics_hz=env_cfg.physics_hz, control_hz=env_cfg.control_hz, armature=env_cfg.armature),
+            SimSettings.of(env_cfg),
             device=dev,
         )
         self.device = dev = self.sim.device

@@ -173,7 +173,7 @@ def _write_rollout(tr, schedule: list[tuple[float, str]], options: dict) -> None
         from charctl.motion.clip import Clip
         from charctl.sim.humanoid import qpos_to_local_rot
 
-        root, rot = qpos_to_local_rot(qpos)
+        root, rot = qpos_to_local_rot(qpos, tr.cfg.env.shoulder_frame)
         clip = Clip(name="cgail_rollout", fps=stats["fps"], root_pos=root, local_rot=rot)
         print(f"wrote {write_bvh(clip, options['bvh'])} ({len(qpos)} frames, falls: {stats['falls']})")
     if options.get("video"):
@@ -181,7 +181,10 @@ def _write_rollout(tr, schedule: list[tuple[float, str]], options: dict) -> None
         from charctl.viz.video import render_qpos
 
         info = render_qpos(
-            load_model(tr.cfg.env.physics_hz, armature=tr.cfg.env.armature), qpos, options["video"], stats["fps"]
+            load_model(tr.cfg.env.physics_hz, armature=tr.cfg.env.armature, shoulder_frame=tr.cfg.env.shoulder_frame),
+            qpos,
+            options["video"],
+            stats["fps"],
         )
         print(f"wrote {options['video']} ({info['frames']} frames, falls: {stats['falls']})")
 

@@ -198,9 +198,12 @@ def score_recording(rec: Recording, ref: ClipReference) -> dict:
     }
 
 
-def write_skill_filmstrip(rec: Recording, ref: ClipReference, path: Path, title: str) -> Path:
+def write_skill_filmstrip(
+    rec: Recording, ref: ClipReference, path: Path, title: str, shoulder_frame: str = "parent"
+) -> Path:
     """Filmstrip of `rec`'s first episode against the clip: the clip's frames in the bottom row, the
-    policy at the same times above them, and on top of those the policy's closest pose to each."""
+    policy at the same times above them, and on top of those the policy's closest pose to each. Both qpos
+    are of the model built with `shoulder_frame` (the run's env.shoulder_frame)."""
     from charctl.sim.humanoid import load_model
     from charctl.viz.filmstrip import write_filmstrip
 
@@ -218,7 +221,7 @@ def write_skill_filmstrip(rec: Recording, ref: ClipReference, path: Path, title:
         for s, tt in zip(same, t)
     ]
     return write_filmstrip(
-        load_model(),
+        load_model(shoulder_frame=shoulder_frame),
         [rec.qpos[0, near], rec.qpos[0, same], ref.qpos[cols]],
         path,
         ["policy: closest pose", "policy: same time", f"clip {ref.clip}"],
@@ -259,6 +262,7 @@ def eval_fidelity(runs: list, episodes: int, out: Path, seed: int = 2468, filmst
                     out / f"{stem}.png",
                     f"{ref.skill} ({label}, {tr.run_dir.name}): coverage {res['coverage']:.2f}, "
                     f"body error {res['body_error']:.3f} m",
+                    shoulder_frame=tr.cfg.env.shoulder_frame,
                 )
                 res["filmstrip"] = f"{stem}.png"
                 written.append((key, f"{stem}.png"))

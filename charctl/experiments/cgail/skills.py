@@ -28,12 +28,12 @@ class SkillData:
     fps: float
 
 
-def load_skills(skills, control_hz: float) -> list[SkillData]:
-    """Load and resample every skill's clip to `control_hz`."""
+def load_skills(skills, control_hz: float, shoulder_frame: str = "parent") -> list[SkillData]:
+    """Load and resample every skill's clip to `control_hz`; qpos/qvel for the model built with `shoulder_frame`."""
     out = []
     for s in skills:
         clip = load_clip(s.clip).resample(control_hz)
-        qpos, qvel = clip_to_qpos_qvel(clip)
+        qpos, qvel = clip_to_qpos_qvel(clip, shoulder_frame)
         obs = disc_obs(clip_kinematics(clip))
         planar = np.linalg.norm(np.diff(clip.root_pos[:, [0, 2]], axis=0), axis=1).sum()
         out.append(

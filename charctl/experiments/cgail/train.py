@@ -35,8 +35,7 @@ def _torch_cpu_sim(env_cfg):
     from charctl.sim.batch import SimSettings
     from charctl.sim.torch_view import TorchBatchedHumanoid
 
-    settings = SimSettings(physics_hz=env_cfg.physics_hz, control_hz=env_cfg.control_hz, armature=env_cfg.armature)
-    return TorchBatchedHumanoid(int(env_cfg.num_envs), settings)
+    return TorchBatchedHumanoid(int(env_cfg.num_envs), SimSettings.of(env_cfg))
 
 
 def _synchronize(device: str) -> None:

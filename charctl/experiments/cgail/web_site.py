@@ -136,8 +136,9 @@ def write_site(tr, out: Path, checkpoint: str | None = None, src: Path = WEB_SRC
 
     check_web_sources(src)
     env = tr.cfg.env
-    # the MJCF the run's environment compiles (BatchedHumanoid -> load_model(physics_hz, friction 1.0, armature))
-    xml = build_mjcf(float(env.physics_hz), 1.0, float(env.armature))
+    # the MJCF the run's environment compiles (BatchedHumanoid -> load_model(physics_hz, friction 1.0, armature,
+    # shoulder_frame))
+    xml = build_mjcf(float(env.physics_hz), 1.0, float(env.armature), shoulder_frame=str(env.shoulder_frame))
     model = mujoco.MjModel.from_xml_string(xml)
     out = Path(out)
     (out / "vendor").mkdir(parents=True, exist_ok=True)
