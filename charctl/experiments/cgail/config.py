@@ -146,11 +146,6 @@ class RewardConfig:
     # where the reference is checked (0 during ramps and grace steps). Needs pose_error_threshold > 0.
     # 0 = off (the paper). docs/cgail.md, "Fidelity recipe".
     w_track: float = 0.0
-    # reward.kind=tracking only: the yaw the root has gained on the reference (summed yaw-rate difference, skills
-    # without a heading goal) counts in the pose term as the root's rotation does in DeepMimic's; the tracking
-    # reward otherwise compares everything in the heading frame, so a spin done without turning costs little.
-    # false = the tracking baseline as shipped (pretrained/tracking-*). docs/cgail.md, "Spindance".
-    track_heading: bool = False
 
 
 @dataclass
@@ -247,8 +242,6 @@ class Config(BaseConfig):
         keys = []
         if not cfg.cgail.conditional:
             keys += ["disc.style_head", "disc.wrong_skill_fakes"]
-        if cfg.reward.kind != "tracking":
-            keys += ["reward.track_heading"]
         if cfg.reward.kind == "tracking":
             keys += [
                 "reward.low_style_threshold",
@@ -304,8 +297,6 @@ def _check_rewards(cfg) -> str | None:
     # w_track's >= 0 stays here, undeclared: tests/test_config_help.py pins w_track as a knob with no declared range
     if r.w_track < 0 or (r.w_track > 0 and r.pose_error_threshold <= 0):
         return "reward.w_track must be >= 0, and > 0 only with reward.pose_error_threshold > 0 (its reference)"
-    if r.track_heading and r.kind != "tracking":
-        return "reward.track_heading=true needs reward.kind=tracking (the tracking baseline's reward)"
     n_skills = len(cfg.use_skills) if cfg.use_skills else len(cfg.skills)
     if r.kind == "tracking" and n_skills > 1 and cfg.env.switch_prob > 0:
         return (

@@ -20,7 +20,7 @@ import numpy as np
 
 from charctl.config import plain_section
 from charctl.experiments.cgail import start_frames
-from charctl.experiments.cgail.env_rules import env_reference_check, env_tracking_reward
+from charctl.experiments.cgail.env_rules import env_reference_check
 from charctl.experiments.cgail.features import (
     DISC_OBS_DIM,
     disc_obs,
@@ -45,6 +45,7 @@ from charctl.experiments.cgail.rules import (
     skill_probabilities,
     state_dim,
     switch_commands,
+    tracking_reward,
     update_fall_rates,
     yaw_scale,
 )
@@ -68,11 +69,9 @@ class CgailEnv:
         yaw_error_threshold: float = 0.0,
         goal_reference_window: int = 0,
         reference_reward: bool = False,
-        track_heading: bool = False,
     ):
         self.skills = skills
         self.tracking = tracking  # phase in the state, reference frame advanced every step
-        self.track_heading = bool(track_heading) and tracking  # reward.track_heading: the root's turning in r_track
         # training only (reward.pose_error_threshold): end episodes that leave the clip's timed reference
         self.pose_threshold, self.pose_grace = float(pose_error_threshold), int(pose_error_grace_steps)
         self.root_scale = root_height_scale(self.pose_threshold, float(root_height_threshold))
@@ -302,7 +301,7 @@ class CgailEnv:
             ref, _ = self._advance_phase(restart=True)
         final_state, pair_next = self._features(k)
         if self.tracking:
-            r_track = env_tracking_reward(self, pair_next, ref)
+            r_track = tracking_reward(pair_next, ref)
         r_goal = self._goal_reward(k)
         fell = self.sim.non_foot_ground_contact(self.cfg.fall_tolerance)
         pose_ended, scored = np.zeros(self.N, dtype=bool), None

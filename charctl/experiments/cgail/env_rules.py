@@ -12,7 +12,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from charctl.experiments.cgail.rules import heading_gain, reference_check, tracking_reward
+from charctl.experiments.cgail.rules import reference_check
 
 
 def env_rules(reward, **overrides: Any) -> dict[str, Any]:
@@ -27,7 +27,6 @@ def env_rules(reward, **overrides: Any) -> dict[str, Any]:
         yaw_error_threshold=float(reward.yaw_error_threshold),
         goal_reference_window=int(reward.goal_reference_window),
         reference_reward=float(reward.w_track) > 0,
-        track_heading=bool(reward.track_heading),
     )
     unknown = set(overrides) - set(rules)
     if unknown:
@@ -49,14 +48,3 @@ def env_reference_check(
         err, scored, pair_next, ref, r_track, *per_env, **rule, reference_reward=env.reference_reward
     )
     return r_track, pose_ended, scored
-
-
-def env_tracking_reward(env: Any, pair_next: Any, ref: Any) -> Any:
-    """reward.kind=tracking's r_track (N,) of either env against its reference `ref` (N, 133); with
-    reward.track_heading the yaw gained on the reference (`rules.heading_gain`, skills without a heading goal)
-    counts in the pose term, and `env.yaw_err` keeps it from step to step."""
-    if not env.track_heading:
-        return tracking_reward(pair_next, ref)
-    counted = ~env.has_goal[env.cmd]
-    env.yaw_err = heading_gain(env.yaw_err, pair_next, ref, counted, 1.0 / env.cfg.control_hz)
-    return tracking_reward(pair_next, ref, env.yaw_err)

@@ -25,7 +25,7 @@ import torch.nn.functional as F
 from charctl.config import plain_section
 from charctl.experiments.cgail import start_frames
 from charctl.experiments.cgail.env_rows import IndexRows, MaskRows, pad_skill_tables
-from charctl.experiments.cgail.env_rules import env_reference_check, env_tracking_reward
+from charctl.experiments.cgail.env_rules import env_reference_check
 from charctl.experiments.cgail.features import DISC_OBS_DIM, Kinematics, disc_obs, heading_frame, policy_state
 from charctl.experiments.cgail.rules import (
     advance_ramp,
@@ -44,6 +44,7 @@ from charctl.experiments.cgail.rules import (
     skill_probabilities,
     state_dim,
     switch_commands,
+    tracking_reward,
     update_fall_rates,
     yaw_scale,
 )
@@ -75,7 +76,6 @@ class CgailDeviceEnv:
         yaw_error_threshold: float = 0.0,
         goal_reference_window: int = 0,
         reference_reward: bool = False,
-        track_heading: bool = False,
         device: str | torch.device = "cpu",
         sim=None,
     ):
@@ -84,7 +84,6 @@ class CgailDeviceEnv:
         self.skills = skills
         self.cfg = env_cfg = plain_section(env_cfg)  # typed fields, cheap reads in the step loop
         self.tracking = tracking  # phase in the state, reference frame advanced every step
-        self.track_heading = bool(track_heading) and tracking  # reward.track_heading: the root's turning in r_track
         # as CgailEnv: the pose-error check against the clip's timed reference, r_track there, env.phase_obs
         self.pose_threshold, self.pose_grace = float(pose_error_threshold), int(pose_error_grace_steps)
         self.root_scale = root_height_scale(self.pose_threshold, float(root_height_threshold))
@@ -333,7 +332,7 @@ class CgailDeviceEnv:
         elif self.timed_reference:
             ref, _ = self._advance_phase(restart=True)
         final_state, pair_next = self._features(k)
-        r_track = env_tracking_reward(self, pair_next, ref) if self.tracking else zeros
+        r_track = tracking_reward(pair_next, ref) if self.tracking else zeros
         r_goal = goal_reward(
             self.goal_angle, k.com_vel, self.speed[self.cmd], self.has_goal[self.cmd], self.cfg.goal_sharpness
         )

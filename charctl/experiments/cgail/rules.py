@@ -45,15 +45,13 @@ OBS_ROOT_H, OBS_ROOT_V, OBS_ROT, OBS_VEL, OBS_EE = (
 )
 
 
-def tracking_reward(obs: Array, ref: Array, heading_error: Array | None = None) -> Array:
+def tracking_reward(obs: Array, ref: Array) -> Array:
     """(N,) r in [0, 1] between simulated and reference disc observations (N, 133).
 
-    r = 0.65 exp(-1 (sum_j |rot6_j - rot6*_j|^2 + psi^2)) + 0.1 exp(-0.1 sum_b |v_b - v*_b|^2)
+    r = 0.65 exp(-1 sum_j |rot6_j - rot6*_j|^2) + 0.1 exp(-0.1 sum_b |v_b - v*_b|^2)
       + 0.15 exp(-40 sum_e |p_e - p*_e|^2) + 0.1 exp(-10 (h - h*)^2 - |v_root - v*_root|^2)
     (joint rotations as the first two rotation-matrix columns; velocities in m/s; positions in m,
-    relative to the root in the heading frame). psi (N,) rad, `heading_error` (reward.track_heading;
-    0 when None): the yaw the root has gained on the reference (`heading_gain`), counted in the pose term
-    as the root's own rotation is in DeepMimic's (a turn by psi about +y moves the rot6 columns by ~psi^2).
+    relative to the root in the heading frame).
     """
     xp = namespace(obs, ref)
 
@@ -62,9 +60,8 @@ def tracking_reward(obs: Array, ref: Array, heading_error: Array | None = None) 
 
     w, k = TRACK_WEIGHTS, TRACK_SCALES
     root = xp.exp(-k["root_height"] * sq(OBS_ROOT_H) - k["root_vel"] * sq(OBS_ROOT_V))
-    pose = sq(OBS_ROT) if heading_error is None else sq(OBS_ROT) + heading_error**2
     return (
-        w["pose"] * xp.exp(-k["pose"] * pose)
+        w["pose"] * xp.exp(-k["pose"] * sq(OBS_ROT))
         + w["vel"] * xp.exp(-k["vel"] * sq(OBS_VEL))
         + w["ee"] * xp.exp(-k["ee"] * sq(OBS_EE))
         + w["root"] * root
@@ -170,18 +167,10 @@ def add_yaw_error(
     restarts at 0. A spin left out adds up; one done a moment late does not. The pose error `err` becomes
     max(err, `scale` |yaw_err|) (`yaw_scale`), so one comparison with the pose threshold checks both."""
     xp = namespace(err, obs, ref)
-    yaw_err = heading_gain(yaw_err, obs, ref, ref_active & (ref_grace == 0) & ~has_goal, dt)
-    return xp.maximum(err, scale * xp.abs(yaw_err)), yaw_err
-
-
-def heading_gain(yaw_err: Array, obs: Array, ref: Array, counted: Array, dt: float) -> Array:
-    """(N,) rad: the yaw the character has gained on its reference after one more control step, yaw_err +
-    (w_y - w*_y) dt with w_y the root's yaw rate in the disc observations `obs` and `ref` (N, 133) (rad/s) and
-    `dt` the control step (s), where `counted` (N,) bool; 0 elsewhere (a heading-goal skill, a reference
-    restarting)."""
-    xp = namespace(yaw_err, obs, ref)
+    counted = ref_active & (ref_grace == 0) & ~has_goal
     grown = yaw_err + (obs[:, OBS_YAW_RATE] - ref[:, OBS_YAW_RATE]) * dt
-    return xp.where(counted, grown, xp.zeros_like(grown))
+    yaw_err = xp.where(counted, grown, xp.zeros_like(grown))
+    return xp.maximum(err, scale * xp.abs(yaw_err)), yaw_err
 
 
 def goal_features(goal_angle: Array, heading: Array, has_goal: Array) -> Array:
