@@ -306,3 +306,22 @@ def test_phase_obs_puts_the_timed_reference_phase_in_the_state(skills):
     env.step(np.zeros((2, 28)))
     angle = 2 * np.pi * 1 / frames
     assert env.ref_frame[0] == 1 and env.state[0, -2:] == pytest.approx([np.cos(angle), np.sin(angle)])
+
+
+def test_the_tracking_baseline_can_end_its_episodes_on_the_pose_check(skills):
+    """reward.kind=tracking with a pose threshold: the kick's clip runs on from the RSI frame as in tracking (no
+    restart), r_track stays the tracking reward, and an env farther than the threshold ends (1 mm: every checked
+    env); without the threshold the same step ends nothing."""
+    from charctl.experiments.cgail.rules import tracking_reward
+
+    cfg = OmegaConf.structured(EnvConfig(num_envs=2, switch_prob=0.0))
+    strict = CgailEnv(skills, cfg, seed=0, tracking=True, pose_error_threshold=1e-3, pose_error_grace_steps=0)
+    plain = CgailEnv(skills, cfg, seed=0, tracking=True)
+    for env in (strict, plain):
+        env.forced_command = np.array([1, 1])
+        env.start_frame, env.random_yaw = 3, False
+        env.reset(np.arange(2))
+    a, b = strict.step(np.zeros((2, 28))), plain.step(np.zeros((2, 28)))
+    assert a.pose_ended.all() and a.terminated.all() and not b.terminated.any()
+    np.testing.assert_allclose(a.r_track, tracking_reward(a.pair_next, skills[1].obs[[4, 4]]))
+    np.testing.assert_allclose(a.r_track, b.r_track)

@@ -118,7 +118,10 @@ class RewardConfig:
     # (a non-looping clip restarts at frame 0 when it ends); after a command switch it starts at frame 0 once the
     # ramp has finished. An episode ends (no bootstrap, not a fall) when a hand, a foot (relative to the root,
     # heading frame) or the root height is farther than this (m) from the reference, outside the grace steps
-    # that follow each restart. 0 = off (the paper). docs/cgail.md, "Fidelity recipe".
+    # that follow each restart. 0 = off (the paper). docs/cgail.md, "Fidelity recipe". With reward.kind=tracking
+    # (set on the command line: the tracking baseline drops the preset's value) the same check ends tracking
+    # episodes, whose clip runs on without restarting (docs/cgail.md, "Spindance": a tracking policy far from
+    # its clip earns no pose reward, exp(-12)).
     pose_error_threshold: float = ranged(0.0, ge=0)
     # control steps after a reference restart with no check (time to reach frame 0)
     pose_error_grace_steps: int = ranged(10, ge=0)
@@ -286,8 +289,6 @@ def _check_rewards(cfg) -> str | None:
     r = cfg.reward
     if r.low_style_threshold > 0 and r.kind != "adversarial":
         return "reward.low_style_threshold > 0 needs reward.kind=adversarial"
-    if r.pose_error_threshold > 0 and r.kind != "adversarial":
-        return "reward.pose_error_threshold > 0 needs reward.kind=adversarial"
     if r.root_height_threshold > 0 and r.pose_error_threshold <= 0:
         return "reward.root_height_threshold must be >= 0, and > 0 only with reward.pose_error_threshold > 0"
     if r.yaw_error_threshold > 0 and r.pose_error_threshold <= 0:
