@@ -165,11 +165,12 @@ demo-cgail: install ## cgail: a short training run (~2 min), then the shipped 3-
 	$(CHARCTL) export $(CGAIL_DEMO_POLICY) --video outputs/demo/cgail_switch.mp4 --commands "$(CGAIL_DEMO_SCHEDULE)" --seconds 13
 
 # Spindance probes (docs/cgail.md, "Spindance"): tracking with the pose check (learns the arm's pass in ~4e6 samples),
-# and the small preset's recipe on spindance alone with and without its style reward. One skill, seed 1, 6e6 samples
-# each (~12 min apiece on 2 cores).
+# and the small preset's recipe on spindance alone with and without its style reward and with reward.w_track=4. One
+# skill, seed 1, 6e6 samples each (~12 min apiece on 2 cores).
 .PHONY: repro-cgail-spindance-probes
-repro-cgail-spindance-probes: install ## cgail: spindance alone, tracking + pose check vs the recipe with / without its style reward (3 x 6e6 samples, ~40 min), evaluated
+repro-cgail-spindance-probes: install ## cgail: spindance alone, tracking + pose check vs the recipe with / without its style reward and with w_track=4 (4 x 6e6 samples, ~50 min), evaluated
 	$(CHARCTL) train cgail reward.kind=tracking "use_skills=[spindance]" cgail.conditional=false reward.pose_error_threshold=0.5 train.total_samples=6000000 train.fidelity_every=1000000 seed=1 output_root=$(CGAIL_FID)/spindance/tracking-term
 	$(CHARCTL) train cgail "use_skills=[spindance]" train.total_samples=6000000 train.fidelity_every=1000000 seed=1 output_root=$(CGAIL_FID)/spindance/recipe
 	$(CHARCTL) train cgail "use_skills=[spindance]" reward.w_style=0 train.total_samples=6000000 train.fidelity_every=1000000 seed=1 output_root=$(CGAIL_FID)/spindance/recipe-nostyle
-	for d in tracking-term recipe recipe-nostyle; do T=$$(ls -d $(CGAIL_FID)/spindance/$$d/cgail/*/ | tail -1); $(CHARCTL) eval $$T --fidelity -k 4 || exit 1; done
+	$(CHARCTL) train cgail "use_skills=[spindance]" reward.w_track=4.0 train.total_samples=6000000 train.fidelity_every=1000000 seed=1 output_root=$(CGAIL_FID)/spindance/recipe-track4
+	for d in tracking-term recipe recipe-nostyle recipe-track4; do T=$$(ls -d $(CGAIL_FID)/spindance/$$d/cgail/*/ | tail -1); $(CHARCTL) eval $$T --fidelity -k 4 || exit 1; done
