@@ -241,7 +241,6 @@ def test_learner_counts_pose_terminations_apart_from_falls(backend):
     [
         ({"reward": {"pose_error_threshold": -0.1}}, "must be >= 0"),
         ({"reward": {"pose_error_grace_steps": -1}}, "must be >= 0"),
-        ({"reward": {"pose_error_threshold": 0.5, "kind": "tracking"}}, "needs reward.kind=adversarial"),
         ({"reward": {"low_style_threshold": 0.05, "kind": "tracking"}}, "needs reward.kind=adversarial"),
     ],
 )

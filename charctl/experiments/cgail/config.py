@@ -118,10 +118,9 @@ class RewardConfig:
     # (a non-looping clip restarts at frame 0 when it ends); after a command switch it starts at frame 0 once the
     # ramp has finished. An episode ends (no bootstrap, not a fall) when a hand, a foot (relative to the root,
     # heading frame) or the root height is farther than this (m) from the reference, outside the grace steps
-    # that follow each restart. 0 = off (the paper). docs/cgail.md, "Fidelity recipe". With reward.kind=tracking
-    # (set on the command line: the tracking baseline drops the preset's value) the same check ends tracking
-    # episodes, whose clip runs on without restarting (docs/cgail.md, "Spindance": a tracking policy far from
-    # its clip earns no pose reward, exp(-12)).
+    # that follow each restart. With reward.kind=tracking (set on the command line: the tracking baseline drops the
+    # preset's value) the same check ends tracking episodes, whose clip runs on without restarting ("Spindance": a
+    # tracking policy far from its clip earns no pose reward). 0 = off (the paper). docs/cgail.md, "Fidelity recipe".
     pose_error_threshold: float = ranged(0.0, ge=0)
     # control steps after a reference restart with no check (time to reach frame 0)
     pose_error_grace_steps: int = ranged(10, ge=0)
