@@ -271,15 +271,12 @@ def local_rot_to_qpos(root_pos: np.ndarray, local_rot: np.ndarray, shoulder_fram
     qpos = np.zeros(shape + (lay.nq,))
     qpos[..., :3] = root_pos
     qpos[..., 3:7] = R.xyzw_to_wxyz(local_rot[..., 0, :])
-    frames = chain_frames(shoulder_frame)
+    chain_rot = _conjugated(local_rot, chain_frames(shoulder_frame), to_chain=True)  # R0^-1 R R0
     for order, bodies in _bodies_by_order().items():
         idx = [skel.index(b) for b in bodies]
-        q = local_rot[..., idx, :].reshape(-1, 4)
+        q = chain_rot[..., idx, :].reshape(-1, 4)
         angles = Rotation.from_quat(q).as_euler(order).reshape(shape + (len(bodies), 3))
         for k, b in enumerate(bodies):
-            if b in frames:  # the chain's angles of R0^-1 R R0
-                r = Rotation.from_quat(local_rot[..., skel.index(b), :].reshape(-1, 4))
-                angles[..., k, :] = (frames[b].inv() * r * frames[b]).as_euler(order).reshape(shape + (3,))
             qpos[..., lay.qpos_slices[b]] = angles[..., k, :]
     for b in HINGE_JOINTS:
         q = local_rot[..., skel.index(b), :]
@@ -295,18 +292,27 @@ def qpos_to_local_rot(qpos: np.ndarray, shoulder_frame: str = "parent") -> tuple
     shape = qpos.shape[:-1]
     rot = np.tile(R.IDENTITY, shape + (skel.num_bodies, 1))
     rot[..., 0, :] = R.normalize(R.wxyz_to_xyzw(qpos[..., 3:7]))
-    frames = chain_frames(shoulder_frame)
     for order, bodies in _bodies_by_order().items():
         angles = np.stack([qpos[..., lay.qpos_slices[b]] for b in bodies], axis=-2)
         q = Rotation.from_euler(order, angles.reshape(-1, 3)).as_quat().reshape(shape + (len(bodies), 4))
         for k, b in enumerate(bodies):
-            if b in frames:  # R0 E R0^-1
-                e = Rotation.from_euler(order, angles[..., k, :].reshape(-1, 3))
-                q[..., k, :] = (frames[b] * e * frames[b].inv()).as_quat().reshape(shape + (4,))
             rot[..., skel.index(b), :] = q[..., k, :]
     for b in HINGE_JOINTS:
         rot[..., skel.index(b), :] = R.from_axis_angle(np.array([0.0, 0.0, 1.0]), qpos[..., lay.qpos_slices[b].start])
-    return qpos[..., :3].copy(), rot
+    return qpos[..., :3].copy(), _conjugated(rot, chain_frames(shoulder_frame), to_chain=False)  # R0 E R0^-1
+
+
+def _conjugated(local_rot: np.ndarray, frames: dict[str, Rotation], to_chain: bool) -> np.ndarray:
+    """(..., 15, 4) xyzw local rotations with each `frames` body's R turned into its chain's frame, R0^-1 R R0
+    (`to_chain`), or back, R0 R R0^-1; the input itself where no body has a frame."""
+    if not frames:
+        return local_rot
+    skel, out = load_skeleton(), local_rot.copy()
+    for b, r0 in frames.items():
+        r = Rotation.from_quat(local_rot[..., skel.index(b), :].reshape(-1, 4))
+        turned = r0.inv() * r * r0 if to_chain else r0 * r * r0.inv()
+        out[..., skel.index(b), :] = turned.as_quat().reshape(local_rot.shape[:-2] + (4,))
+    return out
 
 
 def clip_to_qpos_qvel(clip, shoulder_frame: str = "parent") -> tuple[np.ndarray, np.ndarray]:
