@@ -117,6 +117,21 @@ repro-cgail-10skill-start-frames: install ## cgail: the window run's 1.5e8 check
 	T=$(CGAIL_FID)/start-frames; \
 	$(CHARCTL) eval $$T --checkpoints --after 150000001 -k 8 --confusion-k 4 && $(CHARCTL) eval $$T --fidelity -k 4 && $(CHARCTL) eval $$T --survival 5 -k 16
 
+# The tracking weight that learned spindance alone (docs/cgail.md, "Spindance": reward.w_track=4.0 on the small
+# preset, coverage 0.857 at 1.64e7 samples), first on run H's three skills (does it keep their targets?), then on the
+# window run's ten skills (both radii and the moving walk reference kept, for the jump's flight and the walk's stride).
+.PHONY: repro-cgail-3skill-track4
+repro-cgail-3skill-track4: install ## cgail: run H's command with reward.w_track=4.0 (4e7 samples; ~75 min on 2 cores), evaluated
+	$(CHARCTL) train cgail reward.w_track=4.0 train.total_samples=$(CGAIL_FID_SAMPLES) train.checkpoint_every=20 train.keep_checkpoint_every=2500000 seed=1 output_root=$(CGAIL_FID)/track4-3skill
+	T=$$(ls -d $(CGAIL_FID)/track4-3skill/cgail/*/ | tail -1); \
+	$(CHARCTL) eval $$T --fidelity -k 4 && $(CHARCTL) eval $$T --survival 5 -k 32 && $(CHARCTL) eval $$T --dtw --confusion --switch walk right_kick -k 8
+
+.PHONY: repro-cgail-10skill-track4
+repro-cgail-10skill-track4: install ## cgail: the window run's ten-skill command with reward.w_track=4.0 (1.5e8 samples; ~5 h on 2 cores, resumable), evaluated
+	$(CHARCTL) train cgail "use_skills=[]" reward.w_track=4.0 reward.root_height_threshold=0.15 reward.yaw_error_threshold=1.5 reward.goal_reference_window=3 train.fidelity_every=2000000 train.total_samples=150000000 train.checkpoint_every=20 train.keep_checkpoint_every=2500000 seed=1 output_root=$(CGAIL_FID)/track4-10skill
+	T=$$(ls -d $(CGAIL_FID)/track4-10skill/cgail/*/ | tail -1); \
+	$(CHARCTL) eval $$T --fidelity -k 4 && $(CHARCTL) eval $$T --survival 5 -k 32 && $(CHARCTL) eval $$T --dtw --confusion --switch walk right_kick -k 8
+
 # Ten skills with both radii (docs/cgail.md, "Ten skills with a root-height and a heading radius"): the flight experiment's
 # root-height radius plus reward.yaw_error_threshold=1.5 (the spins must turn), run H's recipe otherwise. Started
 # 2026-12-03 and continued with --resume from pretrained/in-progress/ (~5 h on 2 cores in all).
