@@ -148,6 +148,12 @@ class RewardConfig:
     # where the reference is checked (0 during ramps and grace steps). Needs pose_error_threshold > 0.
     # 0 = off (the paper). docs/cgail.md, "Fidelity recipe".
     w_track: float = 0.0
+    # Per-skill tracking weights: skill name -> the w_T of that skill's commands, replacing w_track for it (the other
+    # skills keep w_track), e.g. reward.w_track_skills={spindance:4.0}. Spindance alone is learned with w_T = 4 where
+    # the style reward holds it back at 1, but w_T = 4 for every skill delays the kick and shortens the walk's
+    # steps (docs/cgail.md, "Spindance"). Names must be skills; values >= 0; any > 0 needs pose_error_threshold > 0.
+    # Empty = w_track for every skill.
+    w_track_skills: dict[str, float] = field(default_factory=dict)
 
 
 @dataclass
@@ -252,6 +258,7 @@ class Config(BaseConfig):
                 "reward.yaw_error_threshold",
                 "reward.goal_reference_window",
                 "reward.w_track",
+                "reward.w_track_skills",
             ]
         return keys
 
@@ -297,12 +304,29 @@ def _check_rewards(cfg) -> str | None:
     # w_track's >= 0 stays here, undeclared: tests/test_config_help.py pins w_track as a knob with no declared range
     if r.w_track < 0 or (r.w_track > 0 and r.pose_error_threshold <= 0):
         return "reward.w_track must be >= 0, and > 0 only with reward.pose_error_threshold > 0 (its reference)"
+    if (msg := _check_track_skills(cfg)) is not None:
+        return msg
     n_skills = len(cfg.use_skills) if cfg.use_skills else len(cfg.skills)
     if r.kind == "tracking" and n_skills > 1 and cfg.env.switch_prob > 0:
         return (
             "reward.kind=tracking over several skills needs env.switch_prob=0: the reference phase belongs to "
             "the clip an episode started with (the multi-skill tracking baseline holds one command per episode)"
         )
+    return None
+
+
+def _check_track_skills(cfg) -> str | None:
+    """reward.w_track_skills: skill names, weights >= 0, a reference to track where any is > 0."""
+    weights = dict(cfg.reward.w_track_skills)
+    names = [s.name for s in cfg.skills]
+    unknown = sorted(set(weights) - set(names))
+    if unknown:
+        return f"reward.w_track_skills names unknown skill(s) {unknown}; skills are {names}"
+    negative = sorted(k for k, v in weights.items() if float(v) < 0)
+    if negative:
+        return f"reward.w_track_skills must be >= 0, got {', '.join(f'{k}={weights[k]}' for k in negative)}"
+    if any(float(v) > 0 for v in weights.values()) and cfg.reward.pose_error_threshold <= 0:
+        return "reward.w_track_skills > 0 needs reward.pose_error_threshold > 0 (its reference)"
     return None
 
 

@@ -26,7 +26,7 @@ def env_rules(reward, **overrides: Any) -> dict[str, Any]:
         root_height_threshold=float(reward.root_height_threshold),
         yaw_error_threshold=float(reward.yaw_error_threshold),
         goal_reference_window=int(reward.goal_reference_window),
-        reference_reward=float(reward.w_track) > 0,
+        reference_reward=float(reward.w_track) > 0 or any(float(v) > 0 for v in reward.w_track_skills.values()),
     )
     unknown = set(overrides) - set(rules)
     if unknown:

@@ -31,16 +31,33 @@ def discriminator_rewards(agent: Agent, ro: Rollout) -> dict[str, torch.Tensor]:
     return out
 
 
+def track_weights(reward_cfg, skill_names: list[str]) -> torch.Tensor:
+    """(K,) float32 tracking weight w_T per skill, in the order of `skill_names` (the command indices):
+    reward.w_track_skills where it names the skill, reward.w_track otherwise."""
+    per_skill = dict(reward_cfg.w_track_skills)
+    return torch.tensor([float(per_skill.get(n, reward_cfg.w_track)) for n in skill_names], dtype=torch.float32)
+
+
 def total_reward(
-    agent: Agent, rewards: dict, r_goal: torch.Tensor, r_track: torch.Tensor | None = None
+    agent: Agent,
+    rewards: dict,
+    r_goal: torch.Tensor,
+    r_track: torch.Tensor | None = None,
+    cmd: torch.Tensor | None = None,
 ) -> torch.Tensor:
-    """r = w_S r_S + w_C r_C + w_G r_G (eq 4.1), plus w_T r_track with reward.w_track; AMP baseline: no r_C;
-    tracking baseline: r = r_track + w_G r_G (the discriminator still trains, as a style diagnostic only)."""
+    """r = w_S r_S + w_C r_C + w_G r_G (eq 4.1), plus w_T r_track with reward.w_track (per skill with
+    reward.w_track_skills: `cmd` (T, N) holds each step's command index); AMP baseline: no r_C; tracking baseline:
+    r = r_track + w_G r_G (the discriminator still trains, as a style diagnostic only)."""
     rc = agent.cfg.reward
     if rc.kind == "tracking":
         return r_track + rc.w_goal * r_goal
     r = rc.w_style * rewards["r_style"] + rc.w_goal * r_goal
-    if rc.w_track > 0 and r_track is not None:  # fidelity recipe: tracking reward against the pose-error reference
+    if r_track is not None and rc.w_track_skills:  # per-skill w_T, indexed by each step's command
+        if cmd is None:
+            raise ValueError("total_reward: reward.w_track_skills needs the commands (cmd)")
+        w_t = track_weights(rc, [s.name for s in agent.skills]).to(r_track.device)
+        r = r + w_t[cmd] * r_track
+    elif rc.w_track > 0 and r_track is not None:  # fidelity recipe: tracking reward against the pose-error reference
         r = r + rc.w_track * r_track
     if agent.conditional:
         r = r + rc.w_class * rewards["r_class"]

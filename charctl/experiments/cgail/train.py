@@ -180,7 +180,7 @@ class CgailLearner(AgentCounters):
         and advantages (bootstrapped with the critic that acted)."""
         agent, env, cfg = self.agent, self.env, self.cfg
         rew = discriminator_rewards(agent, ro)
-        reward = total_reward(agent, rew, ro.r_goal, ro.r_track) + ro.bootstrap
+        reward = total_reward(agent, rew, ro.r_goal, ro.r_track, ro.cmd_b) + ro.bootstrap
         ro.storage.rewards = reward
         critic = (self.acting or agent).model
         with torch.no_grad():
