@@ -121,6 +121,12 @@ def test_torch_env_on_cpu_gives_the_numpy_env_observations(fidelity, window):
     np.testing.assert_allclose(_np(t_res.state), c_res.state, atol=2e-3)
     np.testing.assert_array_equal(_np(t_res.truncated), c_res.truncated)
     np.testing.assert_array_equal(_np(t_res.unstable), c_res.unstable)
+    # the per-skill failure rates (logged as fall_rate/<skill>) follow the ended episodes on both envs, whatever
+    # env.skill_fall_weight (0 here: they do not weight the commands)
+    assert cfg.env.skill_fall_weight == 0
+    if fidelity:
+        assert c_res.pose_ended.any() and not np.allclose(c_env.fall_rate, 0.5)
+    np.testing.assert_allclose(_np(t_env.fall_rate), c_env.fall_rate, rtol=0, atol=1e-12)
 
 
 @pytest.mark.parametrize("window", [0, 3], ids=["closest-frame", "goal-window"])

@@ -347,10 +347,11 @@ class CgailDeviceEnv:
         if self.cfg.start_failure_weight > 0:  # where in its clip each failing env was (not during a command ramp)
             args = (self.cmd, self.ref_frame, terminated & self.ref_active, self.cfg.start_failure_halflife)
             self.frame_failures = start_frames.update_frame_failures(self.frame_failures, *args)
-        if self.cfg.skill_fall_weight > 0:  # a pose-error end counts as a failure of the skill, like a fall
-            self.fall_rate = update_fall_rates(
-                self.fall_rate, self.cmd, done, fell | pose_ended, self.cfg.skill_fall_halflife
-            )
+        # a pose-error end counts as a failure of the skill, like a fall; kept whatever env.skill_fall_weight, as the
+        # numpy env does (logged as fall_rate/<skill>); an all-false `done` leaves the rates as they are
+        self.fall_rate = update_fall_rates(
+            self.fall_rate, self.cmd, done, fell | pose_ended, self.cfg.skill_fall_halflife
+        )
         # the networks' inputs in float32 (a no-op on MuJoCo Warp; over C MuJoCo the cast the numpy path makes)
         self._state, self._obs = final_state, pair_next = final_state.float(), pair_next.float()
         self._advance_ramp()
