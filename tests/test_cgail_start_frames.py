@@ -91,7 +91,7 @@ def test_the_numpy_env_starts_before_recorded_failures_and_records_its_own(skill
 
 
 def test_the_torch_env_draws_the_same_distribution(skills):
-    from charctl.experiments.cgail.env_torch import CgailDeviceEnv
+    from charctl.experiments.cgail.env import CgailDeviceEnv
     from charctl.sim.torch_view import TorchBatchedHumanoid
 
     env = CgailDeviceEnv(

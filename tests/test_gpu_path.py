@@ -306,8 +306,7 @@ def test_device_env_gives_the_cpu_env_observations(warp_sim_factory, fidelity):
 
     from charctl.config import compose_config
     from charctl.experiments.cgail.config import Config
-    from charctl.experiments.cgail.env import CgailEnv
-    from charctl.experiments.cgail.env_torch import CgailDeviceEnv
+    from charctl.experiments.cgail.env import CgailDeviceEnv, CgailEnv
     from charctl.experiments.cgail.skills import load_skills, select_skills
 
     overrides = ["scale=smoke", "env.num_envs=4", "env.goal_max_angle_deg=0", "env.switch_prob=0"]

@@ -91,8 +91,7 @@ def test_torch_env_on_cpu_gives_the_numpy_env_observations(fidelity, window):
 
     from charctl.config import compose_config
     from charctl.experiments.cgail.config import Config
-    from charctl.experiments.cgail.env import CgailEnv
-    from charctl.experiments.cgail.env_torch import CgailDeviceEnv
+    from charctl.experiments.cgail.env import CgailDeviceEnv, CgailEnv
     from charctl.experiments.cgail.skills import load_skills, select_skills
     from charctl.sim.torch_view import TorchBatchedHumanoid
 
@@ -140,7 +139,7 @@ def test_row_form_on_the_cpu_gives_the_mask_forms_episodes(window):
 
     from charctl.config import compose_config
     from charctl.experiments.cgail.config import Config
-    from charctl.experiments.cgail.env_torch import CgailDeviceEnv
+    from charctl.experiments.cgail.env import CgailDeviceEnv
     from charctl.experiments.cgail.skills import load_skills, select_skills
     from charctl.sim.torch_view import TorchBatchedHumanoid
 
@@ -218,8 +217,7 @@ def test_a_shipped_policy_rolls_out_the_same_on_both_envs():
     from omegaconf import OmegaConf
 
     from charctl.experiments.cgail.drive import mean_action
-    from charctl.experiments.cgail.env import CgailEnv
-    from charctl.experiments.cgail.env_torch import CgailDeviceEnv
+    from charctl.experiments.cgail.env import CgailDeviceEnv, CgailEnv
     from charctl.experiments.cgail.rollouts import load_eval_run
     from charctl.experiments.cgail.train import _torch_cpu_sim
 

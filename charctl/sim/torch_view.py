@@ -1,9 +1,9 @@
 """C MuJoCo's batched humanoid (`BatchedHumanoid`) seen as torch tensors on the CPU (env.backend=torch).
 
 `TorchBatchedHumanoid` wraps a `charctl.sim.batch.BatchedHumanoid` and exposes the interface of
-`charctl.sim.warp_batch.WarpBatchedHumanoid` that the device env (`CgailDeviceEnv`), its kinematics
-reader (`warp_kinematics.sim_kinematics`) and the device rollout use, so the one torch env runs over
-C MuJoCo on the CPU as it runs over MuJoCo Warp on a GPU.
+`charctl.sim.warp_batch.WarpBatchedHumanoid` that the torch form of the env (`env.CgailEnv` on
+`env_arrays.TorchArrays`), its kinematics reader (`warp_kinematics.sim_kinematics`) and the device rollout
+use, so the torch env runs over C MuJoCo on the CPU as it runs over MuJoCo Warp on a GPU.
 
 What is a view and what is a copy:
 

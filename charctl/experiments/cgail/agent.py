@@ -138,10 +138,8 @@ def agent_state(agent: Agent, env: CgailEnv | None = None) -> dict:
     }
     if agent.device_generator is not None:  # demonstration pairs drawn on the device
         state["device_gen_rng"] = agent.device_generator.get_state().cpu()
-    if env is not None and getattr(env, "on_device", False):
-        state["env_torch_rng"] = env.generator.get_state().cpu()  # device env (env.backend=warp): torch generator
-    elif env is not None:
-        state["env_rng"] = env.rng.bit_generator.state
+    if env is not None:  # numpy's generator ("env_rng") or the torch env's ("env_torch_rng")
+        state.update(env.arrays.random_state())
     return state
 
 
@@ -164,11 +162,8 @@ def load_agent_state(agent: Agent, state: dict, env: CgailEnv | None = None) -> 
     agent.generator.set_state(state["gen_rng"].cpu())
     if agent.device_generator is not None and "device_gen_rng" in state:
         agent.device_generator.set_state(state["device_gen_rng"].cpu())
-    if env is not None and getattr(env, "on_device", False):
-        if "env_torch_rng" in state:
-            env.generator.set_state(state["env_torch_rng"].cpu())
-    elif env is not None and "env_rng" in state:
-        env.rng.bit_generator.state = state["env_rng"]
+    if env is not None:
+        env.arrays.set_random_state(state)
 
 
 def load_policy_state(agent: Agent, state: dict) -> None:

@@ -1,4 +1,5 @@
-"""Batched multi-skill imitation environment on the foundation simulator (docs/cgail.md).
+"""Batched multi-skill imitation environment on the foundation simulator (docs/cgail.md), one implementation
+for numpy on the CPU and torch on a GPU.
 
 Per env: the commanded skill B, the previous one A and the ramp weight w (eq 4.10:
 c̄ = (1 - w) c_A + w c_B, w rising linearly over `ramp_frames`), the step count and, for
@@ -10,24 +11,31 @@ batch resets that env and counts it), on a large pose error against the clip's t
 
 The rules themselves (state parts, rewards, pose error, reference clock, episode ends, fall rates,
 command switches, the ramp, the reference's restart and grace steps) are `rules.py` and `features.py`,
-shared with the on-device env (`env_torch.py`); this class holds the per-env arrays on numpy and
-applies them, and keeps the resets (by index) and the random numbers.
+written once against the array API; this class holds the per-env arrays and applies them. What differs
+between the array libraries (the simulator it reads, the random numbers, how a subset of the envs is
+selected) is `env_arrays.py`:
+
+* `CgailEnv(skills, env_cfg, ...)`: numpy over C MuJoCo (env.backend=cpu and evaluation);
+* `CgailEnv(..., device=..., sim=...)` / `CgailDeviceEnv`: torch on the simulator's device, MuJoCo Warp
+  (env.backend=warp) or C MuJoCo seen as tensors (env.backend=torch, `charctl.sim.torch_view`). Every
+  branch that depends on data is a mask there, so a GPU control step issues no host round trip. The two
+  draw equally distributed, not identical, random numbers.
+
+Units and frames: radians (yaw about world +y, PD targets), metres, m/s; world y-up.
 """
 
 from __future__ import annotations
+
+import math
 
 import numpy as np
 
 from charctl.config import plain_section
 from charctl.experiments.cgail import start_frames
+from charctl.experiments.cgail.env_arrays import HostArrays, TorchArrays
+from charctl.experiments.cgail.env_rows import IndexRows, MaskRows
 from charctl.experiments.cgail.env_rules import env_reference_check
-from charctl.experiments.cgail.features import (
-    DISC_OBS_DIM,
-    disc_obs,
-    heading_frame,
-    policy_state,
-    sim_kinematics,
-)
+from charctl.experiments.cgail.features import DISC_OBS_DIM, Kinematics, disc_obs, heading_frame, policy_state
 from charctl.experiments.cgail.rules import (
     advance_ramp,
     advance_reference,
@@ -37,12 +45,11 @@ from charctl.experiments.cgail.rules import (
     goal_reference_frame,
     goal_reward,
     phase_features,
-    pose_key_error,
+    pose_key_error_frames,
     pose_keys,
     reference_pose_error,
     restart_after_ramp,
     root_height_scale,
-    skill_probabilities,
     state_dim,
     switch_commands,
     tracking_reward,
@@ -51,8 +58,19 @@ from charctl.experiments.cgail.rules import (
 )
 from charctl.experiments.cgail.skills import SkillData
 from charctl.experiments.cgail.step_result import StepResult
-from charctl.motion import rotations as R
+from charctl.motion.array_compat import namespace, rotations_for
 from charctl.sim.batch import BatchedHumanoid, SimSettings
+
+
+def _simulator(env_cfg, device, sim):
+    """The simulator an env runs on: `sim` when given, else C MuJoCo (no `device`) or MuJoCo Warp on `device`."""
+    if sim is not None:
+        return sim
+    if device is None:
+        return BatchedHumanoid(env_cfg.num_envs, SimSettings.of(env_cfg))
+    from charctl.sim.warp_batch import WarpBatchedHumanoid
+
+    return WarpBatchedHumanoid(int(env_cfg.num_envs), SimSettings.of(env_cfg), device=device)
 
 
 class CgailEnv:
@@ -69,8 +87,13 @@ class CgailEnv:
         yaw_error_threshold: float = 0.0,
         goal_reference_window: int = 0,
         reference_reward: bool = False,
+        device=None,
+        sim=None,
     ):
+        """`device` / `sim`: both None for numpy over a new C MuJoCo batch; a torch simulator (`sim`) or a device
+        for MuJoCo Warp (`device`) for torch. The rule keywords come from `env_rules.env_rules`."""
         self.skills = skills
+        self.cfg = env_cfg = plain_section(env_cfg)  # typed fields, cheap reads in the step loop
         self.tracking = tracking  # phase in the state, reference frame advanced every step
         # training only (reward.pose_error_threshold): end episodes that leave the clip's timed reference
         self.pose_threshold, self.pose_grace = float(pose_error_threshold), int(pose_error_grace_steps)
@@ -78,159 +101,191 @@ class CgailEnv:
         self.yaw_scale = yaw_scale(self.pose_threshold, float(yaw_error_threshold))  # 0: no heading check
         self.goal_window = int(goal_reference_window)  # 0: heading-goal skills scored against the closest frame
         self.reference_reward = bool(reference_reward)  # r_track against that reference (reward.w_track)
-        self.cfg = env_cfg = plain_section(env_cfg)  # typed fields, cheap reads in the step loop
         # env.phase_obs: the timed reference's phase in the state of the adversarial policy (training and evaluation)
         self.phase_obs = bool(getattr(env_cfg, "phase_obs", False)) and not tracking
         self.timed_reference = self.pose_threshold > 0 or self.phase_obs  # reference advanced, restarting at frame 0
-        self.K = len(skills)
         self.conditional = conditional
-        self.rng = np.random.default_rng(seed)
-        self.sim = BatchedHumanoid(
-            env_cfg.num_envs,
-            SimSettings.of(env_cfg),
-        )
-        self.N = env_cfg.num_envs
+        self.K = len(skills)
+        self.N = int(env_cfg.num_envs)
+        self.sim = _simulator(env_cfg, device, sim)
+        host = isinstance(self.sim, BatchedHumanoid)
+        self.arrays = a = HostArrays(self.sim, seed) if host else TorchArrays(self.sim, seed)
+        self.on_device, self.device, self.dtype = a.on_device, a.device, a.dtype
         self.max_steps = int(round(env_cfg.episode_seconds * env_cfg.control_hz))
-        self._per_env_arrays()
-        self.forced_command: np.ndarray | None = None  # evaluation: fixed command per env (-1 = random)
-        self.start_frame: int | None = None  # evaluation: RSI from this clip frame instead of a random one
-        self.random_yaw = True  # RSI turns the character by a random yaw (training); off for evaluation
-        self.has_goal = np.array([s.heading_goal for s in skills])
-        self.speed = np.array([s.mean_speed for s in skills])
-        self.rest = np.zeros(self.sim.layout.nu)
-        self.clip_frames = np.array([len(sk.obs) for sk in skills])
-        self.clip_loops = np.array([sk.loop for sk in skills])
+        self._load_skill_tables(skills)
+        self.rest = a.zeros(self.sim.layout.nu, a.dtype)
         self.state_dim = state_dim(tracking or self.phase_obs)
         self.obs_dim = self.state_dim
-        self.fall_count = 0
-        # per-skill recent failure rate: falls and pose-error ends (env.skill_fall_weight)
-        self.fall_rate = np.full(self.K, 0.5)
-        # env.start_failure_weight: failures per skill and reference frame, and each start frame's lead window
-        self.frame_failures = np.zeros((self.K, int(self.clip_frames.max())))
-        self.rsi_frames = np.array([len(sk.qpos) for sk in skills])
-        self._lead = start_frames.lead_window_index(self.clip_frames, self.clip_loops, self.cfg.start_failure_lead)
-        self._state = np.zeros((self.N, self.state_dim))
-        self._obs = np.zeros((self.N, DISC_OBS_DIM))
-        self.reset(np.arange(self.N))
+        self._init_env_state()
+        self.reset(a.array([True] * self.N, a.bool_dtype))
 
-    def _per_env_arrays(self) -> None:
-        """The per-env bookkeeping arrays (N,), filled by `reset`."""
-        self.cmd = np.zeros(self.N, dtype=np.int64)  # B: current command
-        self.prev_cmd = np.zeros(self.N, dtype=np.int64)  # A: previous command
-        self.w = np.ones(self.N)  # ramp weight
-        self.steps = np.zeros(self.N, dtype=np.int64)
-        self.goal_angle = np.zeros(self.N)  # world yaw of the heading goal (radians about +y)
-        self.ref_frame = np.zeros(self.N, dtype=np.int64)  # reference clip frame at the current phase
-        self.ref_active = np.ones(self.N, dtype=bool)  # pose-error check: reference valid (off during a switch)
-        self.ref_grace = np.zeros(self.N, dtype=np.int64)  # pose-error check: steps left without a check
-        self.yaw_err = np.zeros(self.N)  # reward.yaw_error_threshold: heading gained on the reference (rad)
-        self.episode_return_goal = np.zeros(self.N)
+    # the array library's random state (checkpoints: `agent.agent_state`) and row form
+    @property
+    def rng(self):
+        """numpy's random generator (numpy arrays only)."""
+        return self.arrays.rng
+
+    @property
+    def generator(self):
+        """The torch random generator (torch only)."""
+        return self.arrays.generator
+
+    @property
+    def compact_rows(self) -> bool:
+        """A data-dependent subset as integer ids (True: numpy, torch on the CPU) or a mask (torch on a GPU)."""
+        return self.arrays.compact_rows
+
+    @compact_rows.setter
+    def compact_rows(self, value: bool) -> None:
+        self.arrays.compact_rows = bool(value)
+
+    def _load_skill_tables(self, skills: list[SkillData]) -> None:
+        """Per-skill tables: RSI states and reference observations (padded to the longest clip with its last
+        row), clip lengths, looping, heading goals and mean speeds (m/s)."""
+        a = self.arrays
+        self.rsi_qpos = a.tables([s.qpos for s in skills])  # (K, T, nq)
+        self.rsi_qvel = a.tables([s.qvel for s in skills])  # (K, T, nv)
+        self.ref_obs = a.tables([s.obs for s in skills])  # (K, T, 133)
+        self.ref_keys = pose_keys(self.ref_obs)  # (K, T, 13): what the pose error compares
+        xp = namespace(self.ref_keys)
+        self.ref_keys_t = xp.asarray(xp.permute_dims(self.ref_keys, (0, 2, 1)), copy=True)  # (K, 13, T) frames last
+        i64 = namespace(self.ref_keys).int64
+        self.clip_frames = a.array([len(s.obs) for s in skills], i64)
+        self.rsi_frames = a.array([len(s.qpos) for s in skills], i64)
+        self.clip_loops = a.array([s.loop for s in skills], a.bool_dtype)
+        self.has_goal = a.array([s.heading_goal for s in skills], a.bool_dtype)
+        self.speed = a.array([s.mean_speed for s in skills], a.dtype)
+        clips = np.array([len(s.obs) for s in skills]), np.array([s.loop for s in skills])
+        lead = start_frames.lead_window_index(*clips, self.cfg.start_failure_lead)
+        self._lead = tuple(a.array(x, i64) for x in lead)  # each start frame's lead window
+
+    def _init_env_state(self) -> None:
+        """The per-env state before the first reset: commands, ramp weights, step counts, heading goals,
+        reference frames and checks, failure rates per skill, evaluation overrides, the state / observation."""
+        a, N = self.arrays, self.N
+        i64, f = namespace(self.ref_keys).int64, a.float_dtype
+        f64 = namespace(self.ref_keys).float64
+        self.cmd = a.zeros(N, i64)  # B: current command
+        self.prev_cmd = a.zeros(N, i64)  # A: previous command
+        self.w = a.array([1.0] * N, f)  # ramp weight
+        self.steps = a.zeros(N, i64)
+        self.goal_angle = a.zeros(N, f)  # world yaw of the heading goal (radians about +y)
+        self.ref_frame = a.zeros(N, i64)  # reference clip frame at the current phase
+        self.ref_active = a.array([True] * N, a.bool_dtype)  # pose-error check: reference valid (off during a switch)
+        self.ref_grace = a.zeros(N, i64)  # pose-error check: steps left without a check
+        self.yaw_err = a.zeros(N, f)  # reward.yaw_error_threshold: heading gained on the reference (rad)
+        self.fall_rate = a.array([0.5] * self.K, f64)  # per-skill recent failure rate (env.skill_fall_weight)
+        # env.start_failure_weight: failures per skill and reference frame (start_frames.py)
+        self.frame_failures = a.zeros((self.K, max(len(s.obs) for s in self.skills)), f64)
+        self.forced_command = None  # evaluation: fixed command per env (-1 = random)
+        self.start_frame: int | None = None  # evaluation: RSI from this clip frame instead of a random one
+        self.random_yaw = True  # RSI turns the character by a random yaw (training); off for evaluation
+        self._falls = a.zeros((), i64)
+        self._state = a.zeros((N, self.state_dim), a.net_dtype)
+        self._obs = a.zeros((N, DISC_OBS_DIM), a.net_dtype)
 
     # ------------------------------------------------------------------ commands
-    def command_blend(self) -> np.ndarray:
+    def command_blend(self):
         """(N, K) c̄_t = (1 - w) onehot(A) + w onehot(B)."""
-        c = np.zeros((self.N, self.K))
-        rows = np.arange(self.N)
-        c[rows, self.prev_cmd] += 1.0 - self.w
-        c[rows, self.cmd] += self.w
-        return c
+        xp = namespace(self.cmd)
+        skills = self.arrays.array(list(range(self.K)), self.cmd.dtype)[None, :]
+        w = self.w[:, None]
+        a, b = (xp.astype(c[:, None] == skills, self.w.dtype) for c in (self.prev_cmd, self.cmd))
+        return (1.0 - w) * a + w * b
 
-    def set_command(self, ids: np.ndarray, skill: np.ndarray | int, ramp: bool = True) -> None:
-        """Switch envs `ids` (distinct) to `skill`; with `ramp` the blend goes A -> B over ramp_frames
-        (`rules.switch_commands` on those rows; new heading goals where the command changed)."""
-        ids = np.atleast_1d(np.asarray(ids))
-        new = np.broadcast_to(np.asarray(skill), ids.shape)
-        rows = (self.cmd[ids], self.prev_cmd[ids], self.w[ids], self.ref_active[ids])
+    def set_command(self, ids, skill, ramp: bool = True) -> None:
+        """Switch the envs `ids` to `skill`: distinct integer ids with one skill per id or one for all, or an (N,)
+        bool mask with one skill per env or one for all. With `ramp` the blend goes A -> B over ramp_frames."""
+        xp = namespace(self.cmd)
+        skill = self.arrays.array(skill, self.cmd.dtype)
+        if getattr(ids, "dtype", None) in (bool, self.arrays.bool_dtype):  # a mask
+            mask = self.arrays.array(ids, self.arrays.bool_dtype)
+            new = xp.where(mask, xp.broadcast_to(skill, (self.N,)), self.cmd)
+        else:
+            rows = self.arrays.rows(ids)
+            mask = rows.put(self.arrays.zeros(self.N, self.arrays.bool_dtype), True)
+            new = rows.put(self.cmd, xp.broadcast_to(skill, rows.ids.shape))
+        self._command(mask, new, ramp)
+
+    def _command(self, mask, new, ramp: bool = True) -> None:
+        """Command the envs in the (N,) bool `mask` to `new` (N,) (`rules.switch_commands`; new heading goals where
+        the command changed)."""
         frames = self.cfg.ramp_frames if ramp else 0
-        *rows, changed = switch_commands(*rows, np.ones(ids.shape, dtype=bool), new, frames)
-        self.cmd[ids], self.prev_cmd[ids], self.w[ids], self.ref_active[ids] = rows
-        self._new_goal(ids[changed])
+        self.cmd, self.prev_cmd, self.w, self.ref_active, changed = switch_commands(
+            self.cmd, self.prev_cmd, self.w, self.ref_active, mask, new, frames
+        )
+        self._new_goal(changed)
 
     def _advance_ramp(self) -> None:
         self.w = advance_ramp(self.w, self.cfg.ramp_frames)
 
-    def _new_goal(self, ids: np.ndarray) -> None:
-        if len(ids) == 0:
+    def _new_goal(self, mask) -> None:
+        """New heading goals (world yaw, rad) for the envs in `mask`: within goal_max_angle_deg of their heading."""
+        rows = self.arrays.draw_rows(mask)
+        if isinstance(rows, IndexRows) and len(rows.ids) == 0:
             return
-        heading = R.yaw_about_y(self.sim.body_quat_rows(ids)[:, 0])
-        spread = np.radians(self.cfg.goal_max_angle_deg)
-        self.goal_angle[ids] = heading + self.rng.uniform(-spread, spread, size=len(ids))
+        offset = self.arrays.symmetric(rows, math.radians(self.cfg.goal_max_angle_deg))
+        root = self.arrays.root_quat(rows)
+        self.goal_angle = rows.put(self.goal_angle, rotations_for(root).yaw_about_y(root) + offset)
 
     # ------------------------------------------------------------------ reset
-    def reset(self, ids: np.ndarray) -> None:
-        """RSI of envs `ids` from a random frame of their (new) commanded skill."""
-        ids = np.asarray(ids, dtype=np.int64)
-        if ids.size == 0:
+    def reset(self, ids) -> None:
+        """RSI of the envs `ids` ((n,) integer ids or an (N,) bool mask) from a random frame of a random skill
+        (or the forced one); `env_arrays` draws the random numbers."""
+        rows = self.arrays.rows(ids)
+        draws = self.arrays.reset_draws(self, rows)
+        if draws is None:
             return
-        skill = self._sample_skills(len(ids))
-        if self.forced_command is not None:
-            forced = self.forced_command[ids]
-            skill = np.where(forced >= 0, forced, skill)
-        self.cmd[ids] = skill
-        self.prev_cmd[ids] = skill
-        self.w[ids] = 1.0
-        self.steps[ids] = 0
-        self.ref_active[ids] = True
-        self.ref_grace[ids] = 0
-        self.yaw_err[ids] = 0.0
-        qpos = np.empty((len(ids), self.sim.layout.nq))
-        qvel = np.empty((len(ids), self.sim.layout.nv))
-        weighted = self._failure_weighted_frames(skill)
-        for k in np.unique(skill):  # <= K groups, vectorised inside
-            m = skill == k
-            data = self.skills[k]
-            frames = (
-                weighted[m] if weighted is not None else self.rng.integers(0, len(data.qpos) - 1, size=int(m.sum()))
-            )
-            if self.start_frame is not None:
-                frames[:] = min(self.start_frame, len(data.qpos) - 1)
-            qpos[m] = data.qpos[frames]
-            qvel[m] = data.qvel[frames]
-            self.ref_frame[ids[m]] = frames
-        yaw = self.rng.uniform(-np.pi, np.pi, size=len(ids)) if self.random_yaw else np.zeros(len(ids))
+        skill, frames, yaw, goal_offset = draws
+        qpos = self.rsi_qpos[skill, frames]  # advanced indexing: copies
+        qvel = self.rsi_qvel[skill, frames]
+        R = rotations_for(qpos)
         turn = R.heading_quat(yaw)
-        qpos[:, [0, 2]] = 0.0
+        qpos[:, 0] = 0.0
+        qpos[:, 2] = 0.0
         root = R.wxyz_to_xyzw(qpos[:, 3:7])
         qpos[:, 3:7] = R.xyzw_to_wxyz(R.multiply(turn, root))
         qvel[:, :3] = R.rotate(turn, qvel[:, :3])  # world linear velocity turns; angular is body-local
-        self.sim.set_state(ids, qpos, qvel)
-        self._new_goal(ids)
-        k = sim_kinematics(self.sim, ids)  # only the reset rows
-        self._state[ids], self._obs[ids] = self._features(k, ids)
+        self.sim.set_state(rows.ids, qpos, qvel)
+        self.cmd = rows.put(self.cmd, skill)
+        self.prev_cmd = rows.put(self.prev_cmd, skill)
+        self.w = rows.put(self.w, 1.0)
+        self.steps = rows.put(self.steps, 0)
+        self.ref_frame = rows.put(self.ref_frame, frames)
+        self.ref_active = rows.put(self.ref_active, True)
+        self.ref_grace = rows.put(self.ref_grace, 0)
+        self.yaw_err = rows.put(self.yaw_err, 0.0)
+        k = self.arrays.kinematics(None if isinstance(rows, MaskRows) else rows)
+        self.goal_angle = rows.put(self.goal_angle, R.yaw_about_y(k.body_rot[:, 0]) + goal_offset)
+        state, obs = self._features(k, rows)
+        self._state = rows.put(self._state, self.arrays.to_net(state))
+        self._obs = rows.put(self._obs, self.arrays.to_net(obs))
 
-    def _failure_weighted_frames(self, skill: np.ndarray) -> np.ndarray | None:
-        """(n,) start frames for envs commanded `skill` (n,) drawn by `start_frames` (env.start_failure_weight),
-        or None for uniform RSI (the weight 0: the random stream is then the one uniform RSI always drew)."""
-        weight = self.cfg.start_failure_weight
-        if weight <= 0:
-            return None
-        u = self.rng.random(len(skill))
-        return start_frames.draw_start_frames(self.frame_failures, self._lead, self.rsi_frames, weight, skill, u)
+    def _sample_skills(self, n: int):
+        """(n,) commands: uniform, or partly fall-weighted (env.skill_fall_weight; `rules.skill_probabilities`)."""
+        return self.arrays.skills(n, self.K, self.fall_rate, self.cfg.skill_fall_weight)
 
     # ------------------------------------------------------------------ observation
-    def _goal_features(self, k, rows: np.ndarray | slice = slice(None)) -> np.ndarray:
-        """(n, 2) cos/sin of the goal direction relative to the heading of envs `rows` (0 without a goal)."""
-        return goal_features(self.goal_angle[rows], R.yaw_about_y(k.body_rot[:, 0]), self.has_goal[self.cmd[rows]])
-
-    def _phase_features(self, rows: np.ndarray | slice = slice(None)) -> np.ndarray:
-        """(n, 2) cos/sin of the reference clip phase of envs `rows` (tracking baseline, env.phase_obs). With
-        env.phase_obs it is (0, 0) for skills with a heading goal and while the reference waits for a ramp."""
-        cmd = self.cmd[rows]
-        shown = (~self.has_goal[cmd] & self.ref_active[rows]) if self.phase_obs else None
-        return phase_features(self.ref_frame[rows], self.clip_frames[cmd], shown)
-
-    def _features(self, k, rows: np.ndarray | slice = slice(None)) -> tuple[np.ndarray, np.ndarray]:
-        """(policy state, disc obs) of envs `rows` whose kinematics are `k`, sharing one heading frame."""
+    def _features(self, k: Kinematics, rows=None):
+        """(policy state (n, state_dim), disc obs (n, 133)) of the envs `rows` (an `IndexRows`/`MaskRows`, integer
+        ids, or None / a slice for all) whose kinematics are `k`: the shared features (`features.py`, `rules.py`)
+        with one heading frame, the heading goal and, for the tracking baseline or env.phase_obs, the clip phase."""
+        pick = rows.pick if isinstance(rows, (IndexRows, MaskRows)) else (lambda x: x if rows is None else x[rows])
         f = heading_frame(k)
-        parts = [policy_state(k, f), self._goal_features(k, rows)]
-        if self.tracking or self.phase_obs:
-            parts.append(self._phase_features(rows))
-        return np.concatenate(parts, axis=1), disc_obs(k, f)
+        cmd = pick(self.cmd)
+        parts = [policy_state(k, f), goal_features(pick(self.goal_angle), f.heading, self.has_goal[cmd])]
+        if self.tracking or self.phase_obs:  # env.phase_obs: (0, 0) with a heading goal or while a ramp runs
+            shown = (~self.has_goal[cmd] & pick(self.ref_active)) if self.phase_obs else None
+            phase = phase_features(pick(self.ref_frame), self.clip_frames[cmd], shown)
+            parts.append(self.arrays.to_net(phase) if self.on_device else phase)  # float32 on torch, as it was
+        xp = namespace(parts[0])
+        return xp.concat(parts, axis=1), disc_obs(k, f)
 
-    def _advance_phase(self, restart: bool = False) -> tuple[np.ndarray, np.ndarray]:
-        """Step every env's reference frame (a looping clip wraps); returns (reference obs (N, 133) at the new
-        frame, (N,) clip ended). A non-looping clip ends at its last frame (the tracking baseline truncates
-        there) or, with `restart` (the pose-error reference), starts again at frame 0 with grace steps."""
+    def _advance_phase(self, restart: bool = False):
+        """Step every env's reference frame (`rules.advance_reference`; a looping clip wraps); returns (reference
+        obs (N, 133) at the new frame, (N,) clip ended). A non-looping clip ends at its last frame (the tracking
+        baseline truncates there) or, with `restart` (the pose-error reference), starts again at frame 0 with
+        grace steps."""
         cmd = self.cmd
         self.ref_frame, ended, again = advance_reference(
             self.ref_frame, self.clip_loops[cmd], self.clip_frames[cmd], restart
@@ -239,36 +294,30 @@ class CgailEnv:
             self.ref_grace = count_down_grace(self.ref_grace, again, self.pose_grace)
         return self._reference_obs(), ended
 
-    def _reference_obs(self, frames: np.ndarray | None = None) -> np.ndarray:
+    def _reference_obs(self, frames=None):
         """(N, 133) the commanded clip's disc observation at every env's reference frame (or at `frames`)."""
-        frames = self.ref_frame if frames is None else frames
-        ref = np.empty((self.N, DISC_OBS_DIM))
-        for s in np.unique(self.cmd):  # <= K groups, vectorised inside
-            m = self.cmd == s
-            ref[m] = self.skills[s].obs[frames[m]]
-        return ref
+        return self.ref_obs[self.cmd, self.ref_frame if frames is None else frames]
 
-    def _pose_error(self, obs: np.ndarray, ref: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def _pose_error(self, obs, ref):
         """((N,) m, (N, 133)): `reference_pose_error` against the timed reference `ref`, except for skills with a
         heading goal (locomotion), scored against their clip's closest frame (`rules.goal_reference_frame`: the
         whole clip, or with reward.goal_reference_window a few frames on from the last one): a walk at a cadence
-        of its own is no error. In-place looping clips (jump, dances, spinkick) keep the timed reference, so standing in
-        one of their poses is an error once the clip moves on. Returns the reference each env was scored
-        against as well."""
-        err, ref = reference_pose_error(obs, ref, self.root_scale), ref.copy()
-        synced = self.ref_active & (self.ref_grace == 0)
-        for s in np.unique(self.cmd[self.has_goal[self.cmd]]):
-            m = np.flatnonzero(self.cmd == s)
-            clip = self.skills[s].obs
-            each = pose_key_error(pose_keys(obs[m])[:, None], pose_keys(clip)[None], self.root_scale)  # (n, T) m
-            n = np.full(len(m), len(clip))
-            best = goal_reference_frame(
-                each, self.ref_frame[m], np.full(len(m), self.skills[s].loop), n, self.goal_window, synced[m]
-            )
-            err[m], ref[m] = each[np.arange(len(m)), best], clip[best]
-            if self.goal_window > 0:  # reward.goal_reference_window: the reference moves on from the matched frame
-                self.ref_frame[m] = best
-        return err, ref
+        of its own is no error. In-place looping clips (jump, dances, spinkick) keep the timed reference, so
+        standing in one of their poses is an error once the clip moves on. Returns the reference each env was
+        scored against as well."""
+        timed = reference_pose_error(obs, ref, self.root_scale)
+        rows = self.arrays.rows(self.has_goal[self.cmd])
+        cmd = rows.pick(self.cmd)
+        each = pose_key_error_frames(pose_keys(rows.pick(obs)), self.ref_keys_t[cmd], self.root_scale)  # (n, T)
+        synced = rows.pick(self.ref_active & (self.ref_grace == 0))
+        advanced = rows.pick(self.ref_frame)
+        clip_frames = self.clip_frames[cmd]
+        best = goal_reference_frame(each, advanced, self.clip_loops[cmd], clip_frames, self.goal_window, synced)
+        if self.goal_window > 0:  # reward.goal_reference_window: the reference moves on from the matched frame
+            self.ref_frame = rows.put(self.ref_frame, best)
+        xp = namespace(each)
+        closest = xp.take_along_axis(each, best[:, None], axis=1)[:, 0]
+        return rows.put(timed, closest), rows.put(ref, self.ref_obs[cmd, best])
 
     def _restart_reference_after_ramp(self) -> None:
         """Envs whose command ramp has just finished: the new clip's reference starts at frame 0."""
@@ -277,56 +326,61 @@ class CgailEnv:
         )
 
     @property
-    def state(self) -> np.ndarray:
+    def state(self):
+        """(N, state_dim) policy state."""
         return self._state
 
     @property
-    def obs(self) -> np.ndarray:
+    def obs(self):
+        """(N, 133) discriminator observation."""
         return self._obs
 
-    # ------------------------------------------------------------------ step
-    def step(self, actions: np.ndarray, force: np.ndarray | None = None, force_substeps: int = 0) -> StepResult:
-        """Apply PD targets rest + action_scale * actions for one control step.
+    @property
+    def fall_count(self) -> int:
+        """Falls so far (reading it synchronises with the device)."""
+        return int(self._falls)
 
-        `force` (N, nbody, 6) is an external world-frame push held for the first
-        `force_substeps` physics substeps (push-robustness tests)."""
-        targets = self.rest + self.cfg.action_scale * actions
+    # ------------------------------------------------------------------ step
+    def step(self, actions, force=None, force_substeps: int = 0) -> StepResult:
+        """Apply PD targets rest + action_scale * actions (radians) for one control step; `force`
+        (N, nbody, 6) is an external world-frame push held for the first `force_substeps` physics substeps."""
+        a = self.arrays
+        targets = self.rest + self.cfg.action_scale * a.array(actions, a.dtype)
         unstable = self.sim.step(targets, force=force, force_substeps=force_substeps)
-        k = sim_kinematics(self.sim)
-        clip_ended = np.zeros(self.N, dtype=bool)
-        r_track = np.zeros(self.N)
+        k = a.kinematics()
+        zeros = a.zeros(self.N, a.float_dtype)
+        clip_ended = no_pose_end = a.zeros(self.N, a.bool_dtype)
         if self.tracking:  # the phase in the state is the new one
             ref, clip_ended = self._advance_phase()
         elif self.timed_reference:
             ref, _ = self._advance_phase(restart=True)
         final_state, pair_next = self._features(k)
-        if self.tracking:
-            r_track = tracking_reward(pair_next, ref)
-        r_goal = self._goal_reward(k)
+        r_track = tracking_reward(pair_next, ref) if self.tracking else zeros
+        cmd = self.cmd
+        r_goal = goal_reward(self.goal_angle, k.com_vel, self.speed[cmd], self.has_goal[cmd], self.cfg.goal_sharpness)
         fell = self.sim.non_foot_ground_contact(self.cfg.fall_tolerance)
-        pose_ended, scored = np.zeros(self.N, dtype=bool), None
+        pose_ended, scored = no_pose_end, None
         if self.pose_threshold > 0:
             r_track, pose_ended, scored = env_reference_check(self, pair_next, ref, r_track, fell, unstable)
-        self.steps += 1
+        self.steps = self.steps + 1
         terminated, truncated = episode_end(fell, unstable, pose_ended, self.steps, self.max_steps, clip_ended)
-        self.fall_count += int(fell.sum())
+        self._falls = self._falls + fell.sum()
+        done = terminated | truncated
         if self.cfg.start_failure_weight > 0:  # where in its clip each failing env was (not during a command ramp)
             args = (self.cmd, self.ref_frame, terminated & self.ref_active, self.cfg.start_failure_halflife)
             self.frame_failures = start_frames.update_frame_failures(self.frame_failures, *args)
-        done = np.flatnonzero(terminated | truncated)
-        if done.size:
-            # a pose-error termination counts as a failure of the skill, like a fall (env.skill_fall_weight)
+        if a.on_device or bool(done.any()):  # no ended episode leaves the rates as they are
+            # a pose-error end counts as a failure of the skill, like a fall (logged as fall_rate/<skill>)
             self.fall_rate = update_fall_rates(
-                self.fall_rate, self.cmd, terminated | truncated, fell | pose_ended, self.cfg.skill_fall_halflife
+                self.fall_rate, self.cmd, done, fell | pose_ended, self.cfg.skill_fall_halflife
             )
-        state, obs = final_state.copy(), pair_next.copy()
-        self._state, self._obs = state, obs
+        # the networks' inputs (float32 on torch; the numpy rollout casts them)
+        self._state, self._obs = final_state, pair_next = a.to_net(final_state), a.to_net(pair_next)
         self._advance_ramp()
         if self.timed_reference:
             self._restart_reference_after_ramp()
-        if done.size:
-            self.reset(done)
-        self._maybe_switch(np.setdiff1d(np.arange(self.N), done))  # the envs that did not just reset
+        self.reset(done)
+        self._maybe_switch(~done)  # the envs that did not just reset
         return StepResult(
             self._state,
             self._obs,
@@ -341,21 +395,16 @@ class CgailEnv:
             scored,
         )
 
-    def _goal_reward(self, k) -> np.ndarray:
-        """r_G in [0, 1] (`rules.goal_reward`): 1 for skills without a heading goal."""
-        cmd = self.cmd
-        return goal_reward(self.goal_angle, k.com_vel, self.speed[cmd], self.has_goal[cmd], self.cfg.goal_sharpness)
-
-    def _maybe_switch(self, ids: np.ndarray) -> None:
-        if self.K < 2 or self.cfg.switch_prob <= 0 or ids.size == 0 or self.forced_command is not None:
+    def _maybe_switch(self, mask) -> None:
+        """Switch each env in `mask` to a random command with probability env.switch_prob."""
+        if self.K < 2 or self.cfg.switch_prob <= 0 or self.forced_command is not None:
             return
-        ids = ids[self.rng.random(ids.size) < self.cfg.switch_prob]
-        if ids.size:
-            self.set_command(ids, self._sample_skills(ids.size))
+        switch, new = self.arrays.switches(self, mask)
+        if not self.on_device and not switch.any():
+            return
+        self._command(switch, new)
 
-    def _sample_skills(self, n: int) -> np.ndarray:
-        """(n,) commands: uniform, or partly fall-weighted (env.skill_fall_weight)."""
-        if self.cfg.skill_fall_weight <= 0 or self.K < 2:
-            return self.rng.integers(0, self.K, size=n)
-        p = skill_probabilities(self.fall_rate, self.cfg.skill_fall_weight)
-        return self.rng.choice(self.K, size=n, p=p)
+
+def CgailDeviceEnv(skills: list[SkillData], env_cfg, device="cpu", sim=None, **kwargs) -> CgailEnv:
+    """The torch env: on `sim` (e.g. a `TorchBatchedHumanoid`, env.backend=torch) or on MuJoCo Warp on `device`."""
+    return CgailEnv(skills, env_cfg, device=device, sim=sim, **kwargs)

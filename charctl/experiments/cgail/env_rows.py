@@ -1,10 +1,10 @@
-"""The on-device env's row subsets and skill tables (`env_torch.CgailDeviceEnv`).
+"""The cgail env's row subsets and skill tables (`env.CgailEnv`, `env_arrays`).
 
 A data-dependent subset of the envs (the envs a reset writes, the envs scored against their clip's closest
 frame) in one of two forms with one interface (`pick` the rows values are computed for, `put` them back):
 `MaskRows`, an (N,) bool mask and `torch.where` (no host round trip: the form on a GPU), or `IndexRows`, the
-subset's integer ids (on the CPU, where reading the mask costs nothing: only those rows are computed, as the
-numpy env does). `pad_skill_tables` stacks per-skill clip arrays into one padded tensor.
+subset's integer ids, numpy or torch (on the CPU, where reading the mask costs nothing: only those rows are
+computed). `pad_clip_arrays` / `pad_skill_tables` stack per-skill clip arrays into one padded array / tensor.
 """
 
 from __future__ import annotations
@@ -33,14 +33,14 @@ class MaskRows:
 
 
 class IndexRows:
-    """The same subset as its integer ids (`CgailDeviceEnv.compact_rows`: on the CPU, where reading the mask costs
-    nothing): values computed for those rows only, as the numpy env does, and written into a copy (tensors
-    handed out earlier, e.g. the last step's state, do not change). Every quantity is a row-wise function of its
+    """The same subset as its integer ids, a numpy array or a tensor (on the CPU, where reading the mask costs
+    nothing): values computed for those rows only and written into a copy (arrays handed out earlier, e.g. the
+    last step's state, do not change). Every quantity is a row-wise function of its
     env, so the written values are `MaskRows`' (up to the last bit of a transcendental function, whose
     vectorised and scalar kernels may round differently: ~1e-16 rad on a heading)."""
 
-    def __init__(self, mask: torch.Tensor):
-        self.ids = torch.nonzero(mask).squeeze(1)
+    def __init__(self, ids):
+        self.ids = ids  # (n,) integer ids
 
     def pick(self, x: torch.Tensor) -> torch.Tensor:
         """The subset's rows of per-env `x`."""
@@ -48,7 +48,11 @@ class IndexRows:
 
     def put(self, old: torch.Tensor, new: torch.Tensor | float | bool) -> torch.Tensor:
         """A copy of `old` with `new` (per subset row, or one value) written in the subset's rows, in the result
-        dtype `torch.where` would give."""
+        dtype `torch.where` (`np.where`) would give."""
+        if isinstance(old, np.ndarray):
+            out = old.astype(np.result_type(new, old)) if isinstance(new, np.ndarray) else old.copy()
+            out[self.ids] = new
+            return out
         if not isinstance(new, torch.Tensor):
             return old.clone().index_fill_(0, self.ids, new)
         out = old.to(torch.result_type(new, old), copy=True)
@@ -56,8 +60,12 @@ class IndexRows:
         return out
 
 
-def pad_skill_tables(arrays: list[np.ndarray], device: torch.device, dtype=torch.float32) -> torch.Tensor:
-    """(K, max_len, ...) tensor of per-skill arrays, each padded with its last row."""
+def pad_clip_arrays(arrays: list[np.ndarray]) -> np.ndarray:
+    """(K, max_len, ...) array of per-skill arrays, each padded with its last row."""
     longest = max(len(a) for a in arrays)
-    out = np.stack([np.concatenate([a, np.repeat(a[-1:], longest - len(a), axis=0)]) for a in arrays])
-    return torch.as_tensor(out, dtype=dtype, device=device)
+    return np.stack([np.concatenate([a, np.repeat(a[-1:], longest - len(a), axis=0)]) for a in arrays])
+
+
+def pad_skill_tables(arrays: list[np.ndarray], device: torch.device, dtype=torch.float32) -> torch.Tensor:
+    """`pad_clip_arrays` as a tensor on `device`."""
+    return torch.as_tensor(pad_clip_arrays(arrays), dtype=dtype, device=device)

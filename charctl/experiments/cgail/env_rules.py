@@ -1,6 +1,6 @@
 """The training rules a cgail env enforces, read from the run's `reward` config in one place.
 
-`CgailEnv` / `CgailDeviceEnv` take these as keyword arguments; training (`train.CgailLearner`) and the
+`CgailEnv` takes these as keyword arguments; training (`train.CgailLearner`) and the
 diagnostic scripts that replay a run under its training rules (`scripts/diag_terminations.py`,
 `scripts/diag_goal_reference.py`) build them here, so a new termination or reference knob is wired once; both envs
 apply the pose check through `env_reference_check`.
@@ -37,7 +37,7 @@ def env_rules(reward, **overrides: Any) -> dict[str, Any]:
 def env_reference_check(
     env: Any, pair_next: Any, ref: Any, r_track: Any, fell: Any, unstable: Any
 ) -> tuple[Any, Any, Any]:
-    """One step's pose-error check of either env (`env.CgailEnv`, `env_torch.CgailDeviceEnv`;
+    """One step's pose-error check of the env (`env.CgailEnv`, numpy or torch;
     reward.pose_error_threshold, `rules.reference_check`) on its own arrays: (r_track with the tracking reward where
     the reference is checked, (N,) bool ended by the check, (N, 133) the reference each env was scored against);
     updates `env.yaw_err`."""

@@ -144,7 +144,7 @@ def _count_episode_ends(ro: Rollout, res, done: np.ndarray, steps_before: np.nda
 def _collect_rollout_device(
     agent: Agent, env, steps: int, deterministic: bool, terminate: LowStyleTermination | None = None
 ) -> Rollout:
-    """`_collect_rollout` for the device env (`CgailDeviceEnv`, env.backend=warp): every buffer lives on
+    """`_collect_rollout` for the torch env (`env.CgailEnv` on torch: env.backend=warp or torch): every buffer lives on
     the env's device and the loop never reads a value back to the host (the low-style termination resets
     by mask). Truncated envs' final states
     are kept and bootstrapped with one critic forward after the loop (same parameters as during the

@@ -4,7 +4,7 @@ Pure functions of batched arrays (leading dim N): the heading-goal and clip-phas
 state, the DeepMimic-style tracking reward, the reference pose error, the heading-goal reward, the
 episode ends, and the per-env bookkeeping (command switches and the ramp weight, the timed reference's
 restart and grace steps, the pose-error check and its reward, `reference_check`). `env.CgailEnv` calls
-them with numpy arrays, `env_torch.CgailDeviceEnv` and the web graph with torch tensors
+them with numpy arrays (env.backend=cpu), with torch tensors (env.backend=warp / torch) and the web graph
 (`charctl.motion.array_compat`), so a rule change is one edit.
 
 Frames and units (docs/cgail.md): the disc observation o (133) is in the heading frame (+x facing, y up,

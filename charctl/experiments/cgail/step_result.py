@@ -9,8 +9,8 @@ from charctl.motion.array_compat import Array
 
 @dataclass
 class StepResult:
-    """One control step of all N envs: numpy arrays from `env.CgailEnv`, tensors on the simulation device from
-    `env_torch.CgailDeviceEnv`."""
+    """One control step of all N envs: numpy arrays from `env.CgailEnv` over C MuJoCo, tensors on the simulation device
+    from the torch form (`env.CgailDeviceEnv`)."""
 
     state: Array  # (N, state_dim) next policy state (after resets)
     obs: Array  # (N, 133) next disc obs (after resets)

@@ -31,7 +31,7 @@ from charctl.rl.runner import AgentCounters, crossed_multiple
 
 # ---------------------------------------------------------------------------- the learner
 def _torch_cpu_sim(env_cfg):
-    """env.backend=torch: C MuJoCo (`BatchedHumanoid`) seen as torch tensors on the CPU, for `CgailDeviceEnv`."""
+    """env.backend=torch: C MuJoCo (`BatchedHumanoid`) seen as torch tensors on the CPU, for `CgailEnv`."""
     from charctl.sim.batch import SimSettings
     from charctl.sim.torch_view import TorchBatchedHumanoid
 
@@ -57,15 +57,12 @@ class CgailLearner(AgentCounters):
         self.device = resolve_device(str(cfg.device))  # auto -> cuda when available, else cpu
         self.backend = resolve_backend(str(getattr(cfg.env, "backend", "cpu")), self.device)  # cpu | warp | torch
         self.agent = build_agent(cfg, self.device)
-        env_class = CgailEnv
         env_args = dict(seed=cfg.seed, conditional=self.agent.conditional, **env_rules(cfg.reward))
-        if self.backend in ("warp", "torch"):
-            from charctl.experiments.cgail.env_torch import CgailDeviceEnv
-        if self.backend == "warp":  # MuJoCo Warp on the same device: rollout never leaves it
-            env_class, env_args["device"] = CgailDeviceEnv, self.device
-        elif self.backend == "torch":  # the same torch env on the CPU over C MuJoCo's arrays (no copies)
-            env_class, env_args["device"], env_args["sim"] = CgailDeviceEnv, "cpu", _torch_cpu_sim(cfg.env)
-        self.env = env_class(self.agent.skills, cfg.env, **env_args)
+        if self.backend == "warp":  # torch on MuJoCo Warp on the same device: rollout never leaves it
+            env_args["device"] = self.device
+        elif self.backend == "torch":  # torch on the CPU over C MuJoCo's arrays (no copies)
+            env_args["sim"] = _torch_cpu_sim(cfg.env)
+        self.env = CgailEnv(self.agent.skills, cfg.env, **env_args)  # numpy over C MuJoCo for env.backend=cpu
         self.samples_per_iteration = cfg.train.rollout_steps * self.env.N
         self.episode_lengths: list = []
         self.rng = np.random.default_rng(cfg.seed + 7919)

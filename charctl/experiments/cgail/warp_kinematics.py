@@ -34,7 +34,7 @@ def _mass_tables(device: str, dtype: torch.dtype = torch.float64) -> tuple[torch
 
 def sim_kinematics(sim, rows: torch.Tensor | None = None) -> Kinematics:
     """Kinematics of a `WarpBatchedHumanoid` after a step (exact MuJoCo velocities), on its device: of every
-    env, or of the envs `rows` ((n,) integer ids; the CPU env's resets, `CgailDeviceEnv.compact_rows`).
+    env, or of the envs `rows` ((n,) integer ids; the resets on the CPU, `env_arrays.TorchArrays.compact_rows`).
 
     Over C MuJoCo (`TorchBatchedHumanoid`, env.backend=torch) this is the numpy env's reader
     (`features.sim_kinematics`) on the wrapped `BatchedHumanoid`, its arrays wrapped without copies: the
