@@ -1,7 +1,7 @@
 """cgail rollouts: `rollout_steps` control steps of every env with one batched policy forward per
 step, recorded as a `Rollout` (policy storage, discriminator pairs, commands, goal and tracking
-rewards, truncation bootstraps, episode counters). The CPU env (numpy) and the device env
-(env.backend=warp, everything stays on the device) have a collector each."""
+rewards, truncation bootstraps, episode counters), from the env in either array library (numpy on the CPU,
+torch on the simulator's device) with one collector."""
 
 from __future__ import annotations
 
@@ -50,9 +50,7 @@ def collect_rollout(
     threads = torch.get_num_threads()
     torch.set_num_threads(1)
     try:
-        if getattr(env, "on_device", False):  # env.backend=warp: everything stays on the device
-            return _collect_rollout_device(agent, env, steps, deterministic, terminate)
-        return _collect_rollout(agent, env, steps, deterministic, terminate)
+        return _collect(agent, env, steps, deterministic, terminate)
     finally:
         torch.set_num_threads(threads)
 
@@ -76,121 +74,59 @@ def _empty_rollout(agent: Agent, steps: int, N: int, state_dim: int, dev: torch.
     )
 
 
-def _collect_rollout(
+def _collect(
     agent: Agent, env: CgailEnv, steps: int, deterministic: bool, terminate: LowStyleTermination | None = None
 ) -> Rollout:
-    """`collect_rollout` for the CPU env (`CgailEnv`): numpy arrays go to the learner's device each step."""
+    """`collect_rollout` of either array library of the env: the torch env's tensors stay on its device (the loop
+    never reads a value back to the host; the low-style termination resets by mask); the numpy env's arrays are
+    wrapped as tensors on the learner's device each step (no copy on the CPU), the actions go back as numpy.
+    Truncated envs' final states are kept and bootstrapped with one critic forward after the loop (same
+    parameters as during the loop, so the same values); episode lengths and counters are read once per rollout."""
     N = env.N
-    dev = torch.device(agent.device)  # the CPU env's numpy arrays go to the learner's device (no-op on the CPU)
-    ro = _empty_rollout(agent, steps, N, env.state_dim, dev)
-    for t in range(steps):
-        obs = torch.as_tensor(env.state, dtype=torch.float32, device=dev)
-        blend = torch.as_tensor(env.command_blend(), dtype=torch.float32, device=dev)
-        cond = blend if agent.conditional else None
-        action, logp, value = agent.model.act(obs, cond, deterministic=deterministic)
-        o_t = env.obs.copy()
-        ro.cmd_a[t], ro.cmd_b[t], ro.w[t], ro.cond[t] = (
-            torch.from_numpy(env.prev_cmd),
-            torch.from_numpy(env.cmd),
-            torch.from_numpy(env.w),
-            blend,
-        )
-        steps_before = env.steps.copy()
-        res = env.step(action.cpu().numpy().astype(np.float64))
-        ro.pairs[t] = torch.from_numpy(np.concatenate([o_t, res.pair_next], axis=1))
-        ro.r_goal[t] = torch.from_numpy(res.r_goal)
-        ro.r_track[t] = torch.from_numpy(res.r_track)
-        done = res.terminated | res.truncated
-        if terminate is not None:
-            done = _end_low_style_episodes(ro, t, env, terminate, blend, done)
-        if res.truncated.any():
-            _bootstrap_truncated(agent, ro, t, res, blend)
-        ro.storage.add(obs, cond, action, logp, value, torch.zeros(N, device=dev), torch.from_numpy(done).to(dev))
-        _count_episode_ends(ro, res, done, steps_before)
-    return ro
-
-
-def _end_low_style_episodes(
-    ro: Rollout, t: int, env: CgailEnv, terminate: LowStyleTermination, blend: torch.Tensor, done: np.ndarray
-) -> np.ndarray:
-    """Episodes whose style reward stayed low end here (reset, no bootstrap): `done` with them added."""
-    ended = terminate.update(ro.pairs[t], blend, torch.from_numpy(done).to(ro.pairs.device)).cpu().numpy()
-    if ended.any():
-        env.reset(np.flatnonzero(ended))
-        done = done | ended
-        ro.style_ends += int(ended.sum())
-    return done
-
-
-def _bootstrap_truncated(agent: Agent, ro: Rollout, t: int, res, blend: torch.Tensor) -> None:
-    """gamma * V(final state) of the envs truncated at step `t`, into `ro.bootstrap[t]`."""
-    dev = ro.bootstrap.device
-    idx = np.flatnonzero(res.truncated)
-    fs = torch.as_tensor(res.final_state[idx], dtype=torch.float32, device=dev)
-    with torch.no_grad():
-        v_final = agent.model.value(fs, blend[idx] if agent.conditional else None)
-    ro.bootstrap[t, torch.as_tensor(idx, device=dev)] = agent.cfg.ppo.gamma * v_final
-
-
-def _count_episode_ends(ro: Rollout, res, done: np.ndarray, steps_before: np.ndarray) -> None:
-    """Episode lengths of the envs `done` this step, and the unstable, fall and pose-error counters."""
-    ro.episode_lengths += list(steps_before[done] + 1)
-    ro.unstable += int(res.unstable.sum())
-    pose_ended = res.pose_ended if res.pose_ended is not None else np.zeros(len(done), dtype=bool)
-    ro.falls += int((res.terminated & ~res.unstable & ~pose_ended).sum())
-    ro.pose_ends += int(pose_ended.sum())
-
-
-def _collect_rollout_device(
-    agent: Agent, env, steps: int, deterministic: bool, terminate: LowStyleTermination | None = None
-) -> Rollout:
-    """`_collect_rollout` for the torch env (`env.CgailEnv` on torch: env.backend=warp or torch): every buffer lives on
-    the env's device and the loop never reads a value back to the host (the low-style termination resets
-    by mask). Truncated envs' final states
-    are kept and bootstrapped with one critic forward after the loop (same parameters as during the
-    loop, so the same values); episode lengths and counters are read once per rollout."""
-    N = env.N
-    dev = env.device
+    dev = env.device if env.on_device else torch.device(agent.device)
+    if env.on_device:
+        tensor, to_env = (lambda x, dtype=None: x if dtype is None else x.to(dtype)), (lambda x: x)
+    else:
+        tensor = lambda x, dtype=None: torch.as_tensor(x, dtype=dtype, device=dev)  # noqa: E731
+        to_env = lambda x: x.detach().cpu().numpy().astype(np.float64)  # noqa: E731
     ro = _empty_rollout(agent, steps, N, env.state_dim, dev)
     final_states = torch.zeros(steps, N, env.state_dim, device=dev)
     truncated = torch.zeros(steps, N, dtype=torch.bool, device=dev)
     ended = torch.zeros(steps, N, dtype=torch.bool, device=dev)
     ep_len = torch.zeros(steps, N, dtype=torch.long, device=dev)
-    unstable = torch.zeros((), dtype=torch.long, device=dev)
-    falls = torch.zeros((), dtype=torch.long, device=dev)
-    pose_ends = torch.zeros((), dtype=torch.long, device=dev)
-    style_ends = torch.zeros((), dtype=torch.long, device=dev)
+    counts = torch.zeros(4, dtype=torch.long, device=dev)  # unstable, falls, pose ends, style ends
     zeros = torch.zeros(N, device=dev)
     no_pose_end = torch.zeros(N, dtype=torch.bool, device=dev)
     for t in range(steps):
-        obs = env.state
-        blend = env.command_blend()
+        obs = tensor(env.state, torch.float32)
+        blend = tensor(env.command_blend(), torch.float32)
         cond = blend if agent.conditional else None
         action, logp, value = agent.model.act(obs, cond, deterministic=deterministic)
-        o_t = env.obs
-        ro.cmd_a[t], ro.cmd_b[t], ro.w[t], ro.cond[t] = env.prev_cmd, env.cmd, env.w, blend
-        steps_before = env.steps
-        res = env.step(action)
-        ro.pairs[t] = torch.cat([o_t, res.pair_next], dim=1)
-        ro.r_goal[t], ro.r_track[t] = res.r_goal, res.r_track
-        done = res.terminated | res.truncated
+        o_t = tensor(env.obs)
+        ro.cmd_a[t], ro.cmd_b[t], ro.w[t], ro.cond[t] = tensor(env.prev_cmd), tensor(env.cmd), tensor(env.w), blend
+        steps_before = tensor(env.steps)
+        res = env.step(to_env(action))
+        ro.pairs[t] = torch.cat([o_t, tensor(res.pair_next)], dim=1)
+        ro.r_goal[t], ro.r_track[t] = tensor(res.r_goal), tensor(res.r_track)
+        terminated, unstable = tensor(res.terminated), tensor(res.unstable)
+        done = terminated | tensor(res.truncated)
         if terminate is not None:  # low style for too long: reset now (the mask may be all false)
             low = terminate.update(ro.pairs[t], blend, done)
             if not env.compact_rows or bool(low.any()):  # on the CPU a host read is cheaper than an empty reset
-                env.reset(low)
+                env.reset(low if env.on_device else low.cpu().numpy())
             done = done | low
-            style_ends += low.sum()
-        final_states[t], truncated[t], ended[t] = res.final_state, res.truncated, done
+            counts[3] += low.sum()
+        final_states[t], truncated[t], ended[t] = tensor(res.final_state, torch.float32), tensor(res.truncated), done
         ep_len[t] = steps_before + 1
         ro.storage.add(obs, cond, action, logp, value, zeros, done)
-        pose_ended = res.pose_ended if res.pose_ended is not None else no_pose_end
-        unstable += res.unstable.sum()
-        falls += (res.terminated & ~res.unstable & ~pose_ended).sum()
-        pose_ends += pose_ended.sum()
-    if bool(truncated.any()):  # the rollout's only host reads: this, the lengths and the two counters
+        pose_ended = tensor(res.pose_ended) if res.pose_ended is not None else no_pose_end
+        counts[0] += unstable.sum()
+        counts[1] += (terminated & ~unstable & ~pose_ended).sum()
+        counts[2] += pose_ended.sum()
+    if bool(truncated.any()):  # the rollout's only host reads: this, the lengths and the counters
         with torch.no_grad():
             v_final = agent.model.value(final_states[truncated], ro.cond[truncated] if agent.conditional else None)
         ro.bootstrap[truncated] = agent.cfg.ppo.gamma * v_final
-    ro.episode_lengths, ro.unstable, ro.falls = ep_len[ended].tolist(), int(unstable), int(falls)
-    ro.pose_ends, ro.style_ends = int(pose_ends), int(style_ends)
+    ro.episode_lengths = ep_len[ended].tolist()
+    ro.unstable, ro.falls, ro.pose_ends, ro.style_ends = (int(c) for c in counts.tolist())
     return ro
