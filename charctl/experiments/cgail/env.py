@@ -148,7 +148,10 @@ class CgailEnv:
         self.ref_obs = a.tables([s.obs for s in skills])  # (K, T, 133)
         self.ref_keys = pose_keys(self.ref_obs)  # (K, T, 13): what the pose error compares
         xp = namespace(self.ref_keys)
-        self.ref_keys_t = xp.asarray(xp.permute_dims(self.ref_keys, (0, 2, 1)), copy=True)  # (K, 13, T) frames last
+        # (K, 13, T_goal) frames last, up to the longest heading-goal clip: the closest-frame search of those skills
+        # (past a clip's end the table repeats its last frame, so the shorter search finds the same frames)
+        goal_frames = max([len(s.obs) for s in skills if s.heading_goal], default=1)
+        self.goal_keys_t = xp.asarray(xp.permute_dims(self.ref_keys[:, :goal_frames], (0, 2, 1)), copy=True)
         i64 = namespace(self.ref_keys).int64
         self.clip_frames = a.array([len(s.obs) for s in skills], i64)
         self.rsi_frames = a.array([len(s.qpos) for s in skills], i64)
@@ -308,7 +311,7 @@ class CgailEnv:
         timed = reference_pose_error(obs, ref, self.root_scale)
         rows = self.arrays.rows(self.has_goal[self.cmd])
         cmd = rows.pick(self.cmd)
-        each = pose_key_error_frames(pose_keys(rows.pick(obs)), self.ref_keys_t[cmd], self.root_scale)  # (n, T)
+        each = pose_key_error_frames(pose_keys(rows.pick(obs)), self.goal_keys_t[cmd], self.root_scale)  # (n, T_goal)
         synced = rows.pick(self.ref_active & (self.ref_grace == 0))
         advanced = rows.pick(self.ref_frame)
         clip_frames = self.clip_frames[cmd]
