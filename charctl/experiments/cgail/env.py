@@ -32,7 +32,7 @@ import numpy as np
 
 from charctl.config import plain_section
 from charctl.experiments.cgail import start_frames
-from charctl.experiments.cgail.env_arrays import HostArrays, TorchArrays
+from charctl.experiments.cgail.env_arrays import arrays_for, simulator
 from charctl.experiments.cgail.env_rows import IndexRows, MaskRows
 from charctl.experiments.cgail.env_rules import env_reference_check
 from charctl.experiments.cgail.features import DISC_OBS_DIM, Kinematics, disc_obs, heading_frame, policy_state
@@ -59,18 +59,6 @@ from charctl.experiments.cgail.rules import (
 from charctl.experiments.cgail.skills import SkillData
 from charctl.experiments.cgail.step_result import StepResult
 from charctl.motion.array_compat import namespace, rotations_for
-from charctl.sim.batch import BatchedHumanoid, SimSettings
-
-
-def _simulator(env_cfg, device, sim):
-    """The simulator an env runs on: `sim` when given, else C MuJoCo (no `device`) or MuJoCo Warp on `device`."""
-    if sim is not None:
-        return sim
-    if device is None:
-        return BatchedHumanoid(env_cfg.num_envs, SimSettings.of(env_cfg))
-    from charctl.sim.warp_batch import WarpBatchedHumanoid
-
-    return WarpBatchedHumanoid(int(env_cfg.num_envs), SimSettings.of(env_cfg), device=device)
 
 
 class CgailEnv:
@@ -107,9 +95,8 @@ class CgailEnv:
         self.conditional = conditional
         self.K = len(skills)
         self.N = int(env_cfg.num_envs)
-        self.sim = _simulator(env_cfg, device, sim)
-        host = isinstance(self.sim, BatchedHumanoid)
-        self.arrays = a = HostArrays(self.sim, seed) if host else TorchArrays(self.sim, seed)
+        self.sim = simulator(env_cfg, device, sim)
+        self.arrays = a = arrays_for(self.sim, seed)
         self.on_device, self.device, self.dtype = a.on_device, a.device, a.dtype
         self.max_steps = int(round(env_cfg.episode_seconds * env_cfg.control_hz))
         self._load_skill_tables(skills)

@@ -23,6 +23,7 @@ import torch
 from charctl.experiments.cgail import start_frames
 from charctl.experiments.cgail.env_rows import IndexRows, MaskRows, pad_clip_arrays, pad_skill_tables
 from charctl.experiments.cgail.rules import skill_probabilities
+from charctl.sim.batch import BatchedHumanoid, SimSettings
 
 
 class HostArrays:
@@ -228,3 +229,19 @@ class TorchArrays:
     def set_random_state(self, state: dict) -> None:
         if "env_torch_rng" in state:
             self.generator.set_state(state["env_torch_rng"].cpu())
+
+
+def simulator(env_cfg, device=None, sim=None):
+    """The simulator an env runs on: `sim` when given, else C MuJoCo (no `device`) or MuJoCo Warp on `device`."""
+    if sim is not None:
+        return sim
+    if device is None:
+        return BatchedHumanoid(env_cfg.num_envs, SimSettings.of(env_cfg))
+    from charctl.sim.warp_batch import WarpBatchedHumanoid
+
+    return WarpBatchedHumanoid(int(env_cfg.num_envs), SimSettings.of(env_cfg), device=device)
+
+
+def arrays_for(sim, seed: int) -> HostArrays | TorchArrays:
+    """numpy for C MuJoCo's `BatchedHumanoid`, torch for a tensor simulator (MuJoCo Warp, `TorchBatchedHumanoid`)."""
+    return HostArrays(sim, seed) if isinstance(sim, BatchedHumanoid) else TorchArrays(sim, seed)
