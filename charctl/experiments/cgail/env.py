@@ -62,6 +62,8 @@ from charctl.motion.array_compat import namespace, rotations_for
 
 
 class CgailEnv:
+    """N humanoids imitating K skills (the module docstring): numpy over C MuJoCo, or torch on a tensor simulator."""
+
     def __init__(
         self,
         skills: list[SkillData],
