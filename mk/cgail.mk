@@ -109,10 +109,12 @@ repro-cgail-10skill-window: install ## cgail: ten skills, both radii plus reward
 # 1.5e8 checkpoint with env.start_failure_weight=0.5 (half the starts drawn just before where episodes end). Past the
 # paper's budget: a probe of whether spindance moves when its episodes start before its arm sweep, against the window
 # run's own flat last 5e7 samples. The 2026-12-04 run resumed the full run folder (optimisers and replay kept); this
-# target resumes a copy of the committed inference-only folder, so its optimisers start fresh.
+# target resumes a copy of the committed inference-only folder (in git at CGAIL_WINDOW_COMMIT since it left
+# pretrained/in-progress/ on 2026-12-05), so its optimisers start fresh.
+CGAIL_WINDOW_COMMIT := be5e0ae
 .PHONY: repro-cgail-10skill-start-frames
 repro-cgail-10skill-start-frames: install ## cgail: the window run's 1.5e8 checkpoint continued 3e7 samples with failure-weighted start frames (~1.1 h on 2 cores), evaluated
-	rm -rf $(CGAIL_FID)/start-frames && mkdir -p $(CGAIL_FID) && cp -r pretrained/in-progress/cgail-10skill-window $(CGAIL_FID)/start-frames && rm -rf $(CGAIL_FID)/start-frames/eval
+	rm -rf $(CGAIL_FID)/start-frames && mkdir -p $(CGAIL_FID)/start-frames && git archive $(CGAIL_WINDOW_COMMIT) pretrained/in-progress/cgail-10skill-window | tar -x --strip-components=3 -C $(CGAIL_FID)/start-frames && rm -rf $(CGAIL_FID)/start-frames/eval
 	$(CHARCTL) train cgail --resume $(CGAIL_FID)/start-frames env.start_failure_weight=0.5 train.total_samples=180000000
 	T=$(CGAIL_FID)/start-frames; \
 	$(CHARCTL) eval $$T --checkpoints --after 150000001 -k 8 --confusion-k 4 && $(CHARCTL) eval $$T --fidelity -k 4 && $(CHARCTL) eval $$T --survival 5 -k 16
