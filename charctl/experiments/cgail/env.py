@@ -108,17 +108,7 @@ class CgailEnv:
         self._init_env_state()
         self.reset(a.array([True] * self.N, a.bool_dtype))
 
-    # the array library's random state (checkpoints: `agent.agent_state`) and row form
-    @property
-    def rng(self):
-        """numpy's random generator (numpy arrays only)."""
-        return self.arrays.rng
-
-    @property
-    def generator(self):
-        """The torch random generator (torch only)."""
-        return self.arrays.generator
-
+    # the row form of the array library (its random state, for checkpoints, is `self.arrays.random_state()`)
     @property
     def compact_rows(self) -> bool:
         """A data-dependent subset as integer ids (True: numpy, torch on the CPU) or a mask (torch on a GPU)."""
