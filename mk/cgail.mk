@@ -137,9 +137,10 @@ repro-cgail-10skill-track4: install ## cgail: the window run's ten-skill command
 # The tracking weight only where the style reward holds a skill back (docs/cgail.md, "Spindance": w_track = 4 for
 # every skill delays the kick and shortens the walk on three skills; on spindance alone it learns the dance, with or
 # without the radii; on breakdance alone it was slightly ahead at 6e6 samples): the window run's ten-skill command with
-# reward.w_track_skills={spindance:4.0,breakdance:4.0}, the other eight at w_track = 1. Started 2026-12-05.
+# reward.w_track_skills={spindance:4.0,breakdance:4.0}, the other eight at w_track = 1. Started 2026-12-05 and continued
+# with --resume (~5 h 20 min on 2 cores in all); its 1.5e8 checkpoint is pretrained/cgail-10skill-track-skills.
 .PHONY: repro-cgail-10skill-track-skills
-repro-cgail-10skill-track-skills: install ## cgail: the window run's ten-skill command with w_track 4 for spindance and breakdance (1.5e8 samples; ~5 h on 2 cores, resumable), evaluated
+repro-cgail-10skill-track-skills: install ## cgail: the window run's ten-skill command with w_track 4 for spindance and breakdance (1.5e8 samples; ~5 h on 2 cores, resumable; = pretrained/cgail-10skill-track-skills), evaluated
 	$(CHARCTL) train cgail "use_skills=[]" "reward.w_track_skills={spindance:4.0,breakdance:4.0}" reward.root_height_threshold=0.15 reward.yaw_error_threshold=1.5 reward.goal_reference_window=3 train.fidelity_every=2000000 train.total_samples=150000000 train.checkpoint_every=20 train.keep_checkpoint_every=2500000 seed=1 output_root=$(CGAIL_FID)/track-skills
 	T=$$(ls -d $(CGAIL_FID)/track-skills/cgail/*/ | tail -1); \
 	$(CHARCTL) eval $$T --fidelity -k 4 && $(CHARCTL) eval $$T --survival 5 -k 32 && $(CHARCTL) eval $$T --dtw --confusion --switch walk right_kick -k 8
