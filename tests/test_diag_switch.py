@@ -2,12 +2,10 @@
 pose can meet (2 cm) and the switch at the reset, the pose check is off for the whole ramp (R steps: the reference
 is suspended at the switch and restarts at frame 0 at the end of the step where w reaches 1, step R - 1) and then
 for the G grace steps (counted down one per step from the next step on), so every env ends on the first checked
-step, step R + G - 1 — one step before ramp_end + G — and none by a fall."""
+step, step R + G - 1 — one step before ramp_end + G — and none by a fall. (Its one-line error for an unknown skill is
+tested with diag_terminations', in tests/test_diag_terminations.py.)"""
 
 from __future__ import annotations
-
-import subprocess
-import sys
 
 import numpy as np
 
@@ -28,13 +26,3 @@ def test_a_radius_no_pose_meets_ends_every_env_on_the_first_checked_step_after_t
     assert m["ramp_end"] == ramp
     assert m["pose_end"].all()
     np.testing.assert_array_equal(m["end_step"], ramp + m["grace"] - 1)
-
-
-def test_an_unknown_skill_is_a_one_line_error():
-    res = subprocess.run(
-        [sys.executable, str(REPO / "scripts/diag_switch.py"), str(RUN), "--to", "kick"],
-        capture_output=True,
-        text=True,
-    )
-    assert res.returncode != 0 and "Traceback" not in res.stderr
-    assert res.stderr.strip() == f"error: unknown skill 'kick' for {RUN}; its skills are walk, run, right_kick"
