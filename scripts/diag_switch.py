@@ -29,6 +29,7 @@ def measure(run, ka: int, kb: int, envs: int, switch_step: int, steps: int) -> d
 
     from charctl.experiments.cgail.drive import policy_steps
     from charctl.experiments.cgail.env_rules import env_rules
+    from charctl.experiments.cgail.rollouts import switch_at
 
     torch.manual_seed(0)
     rules = env_rules(run.cfg.reward, tracking=False, reference_reward=True)
@@ -37,11 +38,7 @@ def measure(run, ka: int, kb: int, envs: int, switch_step: int, steps: int) -> d
     env.start_frame = 0
     env.random_yaw = False
     env.reset(np.arange(envs))
-
-    def switch(t: int) -> None:
-        if t == switch_step:
-            env.set_command(np.arange(envs), kb, ramp=True)
-            env.forced_command = np.full(envs, kb)
+    switch = switch_at(env, kb, switch_step, int(run.cfg.env.ramp_frames))  # the switch study's own switch
 
     alive = np.ones(envs, dtype=bool)
     end_step = np.full(envs, -1)
@@ -81,10 +78,12 @@ def main() -> None:
     ap.add_argument("--switch-step", type=int, default=30, help="control step of the switch (30 Hz)")
     ap.add_argument("--seconds", type=float, default=8.0, help="length of each rollout")
     args = ap.parse_args()
-    steps = int(round(args.seconds * 30))
-    if args.envs < 1 or args.switch_step < 0 or steps <= args.switch_step:
-        raise SystemExit("error: --envs must be >= 1, --switch-step >= 0 and --seconds longer than the switch step")
+    if args.envs < 1 or args.switch_step < 0 or args.seconds <= 0:
+        raise SystemExit("error: --envs must be >= 1, --switch-step >= 0 and --seconds > 0")
     run = load_eval_run(args.run, device="cpu")
+    steps = int(round(args.seconds * run.cfg.env.control_hz))
+    if steps <= args.switch_step:
+        raise SystemExit(f"error: --seconds {args.seconds:g} ends before the switch at step {args.switch_step}")
     try:  # the run's own one-line error for a skill it does not have
         ka, kb = run.skill_index(args.skill_a), run.skill_index(args.skill_b)
     except CharctlError as exc:

@@ -158,7 +158,7 @@ class SwitchRecording:
     rot_after: np.ndarray  # (F, N, 15, 4)
 
 
-def _switch_at(env: CgailEnv, kb: int, t_switch: int, ramp: int) -> Callable[[int], tuple[np.ndarray, ...]]:
+def switch_at(env: CgailEnv, kb: int, t_switch: int, ramp: int) -> Callable[[int], tuple[np.ndarray, ...]]:
     """`before_step` of the switch study: at control step `t_switch` every env is commanded `kb` (ramped
     when `ramp` > 0); each step's command state (A, B, w, blend c̄), read before the step, is returned."""
 
@@ -186,7 +186,7 @@ def switch_rollout(
     env.reset(np.arange(trials))
     probs, rs, rc, alive_hist, pos_after, rot_after = [], [], [], [], [], []
     alive = np.ones(trials, dtype=bool)
-    for step in policy_steps(tr.agent, env, t_end, before_step=_switch_at(env, kb, t_switch, ramp)):
+    for step in policy_steps(tr.agent, env, t_end, before_step=switch_at(env, kb, t_switch, ramp)):
         t, res, (cmd_a, cmd_b, w, blend) = step.t, step.result, step.before
         if t == t_switch:
             alive_at_switch = alive.copy()
