@@ -75,3 +75,22 @@ def test_a_recorded_config_is_taken_as_it_is():
 def test_a_bare_tilde_is_a_bad_override():
     with pytest.raises(CharctlError, match="overrides look like key=value"):
         _compose("~")
+
+
+@pytest.mark.parametrize(
+    ("overrides", "label"),
+    [
+        ((), "cGAIL"),
+        (("cgail.class_loss=ls",), "cGAIL-LS"),
+        (("cgail.conditional=false",), "AMP"),
+        (("reward.kind=tracking", "use_skills=[walk]"), "tracking"),
+        (("reward.kind=tracking", "use_skills=[walk]", "cgail.conditional=false"), "tracking"),
+    ],
+)
+def test_method_label_names_the_method_from_the_config_and_from_a_stored_one(overrides, label, tmp_path):
+    from charctl.experiments.cgail.config import method_label
+
+    cfg = _compose("scale=small", *overrides)
+    assert method_label(cfg) == label
+    OmegaConf.save(cfg, tmp_path / "config.yaml")  # as a run folder stores it
+    assert method_label(OmegaConf.load(tmp_path / "config.yaml")) == label

@@ -275,6 +275,17 @@ class Config(BaseConfig):
         return None
 
 
+def method_label(cfg) -> str:
+    """The method a run trains, as tables, curves and progress bars name it: "tracking" (reward.kind=tracking),
+    "AMP" (cgail.conditional=false), "cGAIL-LS" (cgail.class_loss=ls) or "cGAIL". `cfg` a composed config or
+    the OmegaConf one a run folder stores (`charctl.runs.read_run_config`)."""
+    if cfg.reward.kind == "tracking":
+        return "tracking"
+    if not cfg.cgail.conditional:
+        return "AMP"
+    return "cGAIL-LS" if cfg.cgail.class_loss == "ls" else "cGAIL"
+
+
 def _check_skills(cfg) -> str | None:
     """The skill list, use_skills and the PPO section."""
     if not cfg.skills:

@@ -10,6 +10,7 @@ import torch
 
 from charctl.errors import CharctlError
 from charctl.experiments.cgail.agent import Agent, build_agent, load_policy_state
+from charctl.experiments.cgail.config import method_label
 from charctl.experiments.cgail.drive import mean_action
 from charctl.experiments.cgail.env import CgailEnv
 from charctl.motion import rotations as R
@@ -27,12 +28,7 @@ class TrainedRun:
 
     @property
     def label(self) -> str:
-        if self.cfg.reward.kind == "tracking":
-            return "tracking"
-        kind = "cGAIL" if self.agent.conditional else "AMP"
-        if self.agent.conditional and self.cfg.cgail.class_loss == "ls":
-            kind += "-LS"
-        return kind
+        return method_label(self.cfg)
 
     def skill_index(self, name: str) -> int:
         if name not in self.skill_names:

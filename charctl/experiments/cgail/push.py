@@ -21,6 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from charctl.errors import CharctlError
+from charctl.experiments.cgail.config import method_label
 from charctl.experiments.cgail.drive import ForceSchedule, policy_steps
 from charctl.experiments.cgail.env import CgailEnv
 from charctl.experiments.cgail.policy import load_trained_run
@@ -108,9 +109,7 @@ def find_baseline_run(output_root: Path) -> str:
 
 
 def baseline_label(run_dir: str) -> str:
-    """'full body (AMP walk, <run>)' or 'full body (cGAIL walk, <run>)'."""
+    """'full body (<method> walk, <run>)', the method as `config.method_label` names it (AMP, cGAIL, ...)."""
     from charctl.runs import read_run_config
 
-    c = read_run_config(run_dir)
-    mode = "cGAIL" if (c.get("cgail") or {}).get("conditional", True) else "AMP"
-    return f"full body ({mode} walk, {Path(run_dir).name})"
+    return f"full body ({method_label(read_run_config(run_dir))} walk, {Path(run_dir).name})"

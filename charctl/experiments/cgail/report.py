@@ -11,6 +11,7 @@ import numpy as np
 
 from charctl.eval import report as shared
 from charctl.eval.report import markdown_table, print_table, write_csv, write_json
+from charctl.experiments.cgail.config import method_label
 
 REPORT_HEADER = "# cgail evaluation report\n\nPaper values: Table 6.1 (docs/cgail.md). Produced by charctl.\n"
 DTW_METRIC = "mean per-frame e_pose (radians, l2 over the 12 joints) along the DTW path, RSI at frame 0"
@@ -184,8 +185,8 @@ def write_curves(run_dirs: list[Path], out: Path) -> dict:
 
 
 def _curve_runs(run_dirs: list[Path]) -> list[tuple[str, object, dict]]:
-    """(label, config, TensorBoard scalars) per run; the label names the method (cGAIL, cGAIL-LS or
-    AMP), its skill count and the run folder."""
+    """(label, config, TensorBoard scalars) per run; the label names the method (`config.method_label`), its
+    skill count and the run folder."""
     from charctl.eval.tb import read_scalars
     from charctl.runs import read_run_config
 
@@ -193,10 +194,7 @@ def _curve_runs(run_dirs: list[Path]) -> list[tuple[str, object, dict]]:
     for d in run_dirs:
         cfg = read_run_config(d)
         n_sk = len(cfg.use_skills) if cfg.use_skills else len(cfg.skills)
-        kind = "cGAIL" if cfg.cgail.conditional else "AMP"
-        if cfg.cgail.conditional and cfg.cgail.class_loss == "ls":
-            kind += "-LS"
-        runs.append((f"{kind} ({n_sk} skills) {Path(d).name}", cfg, read_scalars(Path(d) / "tb")))
+        runs.append((f"{method_label(cfg)} ({n_sk} skills) {Path(d).name}", cfg, read_scalars(Path(d) / "tb")))
     return runs
 
 

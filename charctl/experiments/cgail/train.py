@@ -20,6 +20,7 @@ import numpy as np
 import torch
 
 from charctl.experiments.cgail.agent import Agent, agent_state, build_agent, load_agent_state
+from charctl.experiments.cgail.config import method_label
 from charctl.experiments.cgail.disc_update import class_accuracy_on_policy, update_discriminator
 from charctl.experiments.cgail.env import CgailEnv
 from charctl.experiments.cgail.env_rules import env_rules
@@ -260,14 +261,11 @@ def train(cfg, run) -> dict:
     from charctl.rl.runner import RunnerSettings, run_on_policy
 
     learner = CgailLearner(cfg)
-    kind = "cGAIL" if learner.agent.conditional else "AMP"
-    if cfg.reward.kind == "tracking":
-        kind = f"tracking, {kind}"
     settings = RunnerSettings(
         total_samples=int(cfg.train.total_samples),
         checkpoint_every=int(cfg.train.checkpoint_every),
         keep_every=int(cfg.train.keep_checkpoint_every),
         log_every=int(cfg.train.log_every),
-        description=f"cgail ({kind}, {learner.agent.num_skills} skills)",
+        description=f"cgail ({method_label(cfg)}, {learner.agent.num_skills} skills)",
     )
     return run_on_policy(learner, run, settings)
