@@ -9,7 +9,7 @@ from charctl.config import compose_config, validate
 from charctl.errors import CharctlError
 from charctl.experiments.cgail.config import Config
 
-from conftest import cgail_paper_recipe
+from conftest import REPO, cgail_paper_recipe
 
 
 def _compose(*overrides: str):
@@ -94,3 +94,12 @@ def test_method_label_names_the_method_from_the_config_and_from_a_stored_one(ove
     assert method_label(cfg) == label
     OmegaConf.save(cfg, tmp_path / "config.yaml")  # as a run folder stores it
     assert method_label(OmegaConf.load(tmp_path / "config.yaml")) == label
+
+
+def test_method_label_reads_a_key_an_older_run_lacks_as_the_schema_default():
+    from charctl.experiments.cgail.config import method_label
+
+    # pretrained/amp-walk's stored config has no reward.kind; a bare cGAIL config names no class loss
+    assert method_label(OmegaConf.create({"reward": {}, "cgail": {"conditional": False}})) == "AMP"
+    assert method_label(OmegaConf.create({"cgail": {"conditional": True}})) == "cGAIL"
+    assert method_label(OmegaConf.load(REPO / "pretrained/amp-walk/config.yaml")) == "AMP"

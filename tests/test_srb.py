@@ -463,8 +463,7 @@ def test_full_body_baseline_is_found_and_run_through_the_protocol(tmp_path, monk
         (d / "checkpoints").mkdir(parents=True)
         (d / "checkpoints" / "last.pt").write_bytes(b"x")
         (d / "config.yaml").write_text(
-            f"experiment: cgail\ncgail: {{conditional: {str(conditional).lower()}, class_loss: ce}}\n"
-            f"reward: {{kind: adversarial}}\nuse_skills: {skills}\n"
+            f"experiment: cgail\ncgail: {{conditional: {str(conditional).lower()}}}\nuse_skills: {skills}\n"
         )
         return d
 

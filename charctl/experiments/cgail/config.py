@@ -286,12 +286,15 @@ class Config(BaseConfig):
 def method_label(cfg) -> str:
     """The method a run trains, as tables, curves and progress bars name it: "tracking" (reward.kind=tracking),
     "AMP" (cgail.conditional=false), "cGAIL-LS" (cgail.class_loss=ls) or "cGAIL". `cfg` a composed config or
-    the OmegaConf one a run folder stores (`charctl.runs.read_run_config`)."""
-    if cfg.reward.kind == "tracking":
+    the OmegaConf one a run folder stores (`charctl.runs.read_run_config`); a key an older run's config lacks
+    (`pretrained/amp-walk` has no reward.kind) reads as the schema's default."""
+    from omegaconf import OmegaConf
+
+    if OmegaConf.select(cfg, "reward.kind", default=RewardConfig.kind) == "tracking":
         return "tracking"
-    if not cfg.cgail.conditional:
+    if not OmegaConf.select(cfg, "cgail.conditional", default=CgailSection.conditional):
         return "AMP"
-    return "cGAIL-LS" if cfg.cgail.class_loss == "ls" else "cGAIL"
+    return "cGAIL-LS" if OmegaConf.select(cfg, "cgail.class_loss", default=CgailSection.class_loss) == "ls" else "cGAIL"
 
 
 def _check_skills(cfg) -> str | None:
