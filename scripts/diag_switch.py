@@ -8,7 +8,7 @@ switched to B with the run's ramp (env.ramp_frames) — the switch study's proto
 but under the run's *training* rules (the pose check with its radii, as `scripts/diag_terminations.py`), so the
 ends show what training does with such an episode. During the ramp the pose check is off; when the ramp ends B's
 reference starts at its frame 0 and is unchecked for its grace steps (rules.restart_after_ramp), and with
-reward.switch_lenient_steps (or `--lenient N` in its place) the check ends nothing for that many steps. Prints how many
+reward.restart_lenient_steps (or `--lenient N` in its place) the check ends nothing for that many steps. Prints how many
 envs ended by the pose check and by a fall, and when, in control steps after the ramp's end (30 Hz): an episode
 that always ends there before B's motion is due (the right kick's chamber is at ~20 frames) never trains the
 transition. A diagnostic for the ten-skill policy's walk -> right_kick switch (docs/cgail.md), not a target.
@@ -28,7 +28,7 @@ def measure(
     reset, 0-based) at which each env's episode ended, -1 if it did not; `pose_end` (envs,) bool, ended by the
     pose check; `ramp_end` the step at which the ramp ends (switch_step + env.ramp_frames); `grace` the steps
     B's reference goes unchecked after it; `lenient` the steps after it in which the check ends nothing (`lenient`
-    given: in place of the run's reward.switch_lenient_steps)."""
+    given: in place of the run's reward.restart_lenient_steps)."""
     import torch
 
     from charctl.experiments.cgail.drive import policy_steps
@@ -38,7 +38,7 @@ def measure(
     torch.manual_seed(0)
     rules = env_rules(run.cfg.reward, tracking=False, reference_reward=True)
     if lenient is not None:
-        rules["switch_lenient_steps"] = lenient
+        rules["restart_lenient_steps"] = lenient
     env = run.make_env(envs, seed=7, rules=rules, switch_prob=0.0, episode_seconds=steps / run.cfg.env.control_hz + 1)
     env.forced_command = np.full(envs, ka)
     env.start_frame = 0
@@ -62,7 +62,7 @@ def measure(
         "pose_end": pose_end,
         "ramp_end": switch_step + int(run.cfg.env.ramp_frames),
         "grace": int(env.pose_grace),
-        "lenient": int(env.switch_lenient),
+        "lenient": int(env.restart_lenient),
     }
 
 

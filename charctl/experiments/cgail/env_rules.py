@@ -26,7 +26,7 @@ def env_rules(reward, **overrides: Any) -> dict[str, Any]:
         root_height_threshold=float(reward.root_height_threshold),
         yaw_error_threshold=float(reward.yaw_error_threshold),
         goal_reference_window=int(reward.goal_reference_window),
-        switch_lenient_steps=int(reward.switch_lenient_steps),
+        restart_lenient_steps=int(reward.restart_lenient_steps),
         reference_reward=float(reward.w_track) > 0 or any(float(v) > 0 for v in reward.w_track_skills.values()),
     )
     unknown = set(overrides) - set(rules)
@@ -48,6 +48,6 @@ def env_reference_check(
     r_track, pose_ended, _, env.yaw_err = reference_check(
         err, scored, pair_next, ref, r_track, *per_env, **rule, reference_reward=env.reference_reward
     )
-    if env.switch_lenient > 0:  # reward.switch_lenient_steps: no pose-check end just after a switch's ramp
+    if env.restart_lenient > 0:  # reward.restart_lenient_steps: no pose-check end just after a restart
         pose_ended = pose_ended & (env.ref_lenient == 0)
     return r_track, pose_ended, scored

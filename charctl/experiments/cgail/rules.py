@@ -316,9 +316,9 @@ def count_down_grace(ref_grace: Array, restarted: Array, grace: int) -> Array:
 
 
 def count_down_lenience(lenient: Array, started: Array, steps: int) -> Array:
-    """(N,) control steps left in which the pose check may not end the episode (reward.switch_lenient_steps):
-    `steps` where the new skill's reference has just started after a command ramp (`started` (N,) bool, from
-    `restart_after_ramp`), else one fewer (not below 0)."""
+    """(N,) control steps left in which the pose check may not end the episode (reward.restart_lenient_steps):
+    `steps` where the timed reference has just restarted at frame 0 (`started` (N,) bool: after a command ramp,
+    `restart_after_ramp`, or past a non-looping clip's end, `advance_reference`), else one fewer (not below 0)."""
     xp = namespace(lenient, started)
     return xp.where(started, xp.full_like(lenient, steps), xp.maximum(lenient - 1, xp.zeros_like(lenient)))
 
