@@ -20,7 +20,6 @@ def test_each_rule_is_read_from_its_key():
             "reward.root_height_threshold=0.15",
             "reward.yaw_error_threshold=1.5",
             "reward.goal_reference_window=3",
-            "reward.restart_lenient_steps=45",
             "reward.w_track=0.5",
         )
     )
@@ -31,7 +30,6 @@ def test_each_rule_is_read_from_its_key():
         root_height_threshold=0.15,
         yaw_error_threshold=1.5,
         goal_reference_window=3,
-        restart_lenient_steps=45,
         reference_reward=True,
     )
 
@@ -53,12 +51,9 @@ def test_the_training_env_enforces_them():
     from charctl.experiments.cgail.skills import load_skills, select_skills
 
     cfg = compose_config(
-        "cgail",
-        ["scale=small", "use_skills=[walk]", "reward.yaw_error_threshold=1.5", "reward.restart_lenient_steps=45"]
-        + ["env.num_envs=2"],
-        Config,
+        "cgail", ["scale=small", "use_skills=[walk]", "reward.yaw_error_threshold=1.5", "env.num_envs=2"], Config
     )
     env = CgailEnv(load_skills(select_skills(cfg), cfg.env.control_hz), cfg.env, seed=0, **env_rules(cfg.reward))
     assert env.pose_threshold == 0.5 and env.pose_grace == int(cfg.reward.pose_error_grace_steps)
     assert env.yaw_scale == pytest.approx(0.5 / 1.5) and env.root_scale == 1.0  # root_scale 1: no root radius
-    assert env.timed_reference and env.restart_lenient == 45
+    assert env.timed_reference

@@ -212,76 +212,6 @@ def test_episodes_that_leave_the_reference_end_without_counting_a_fall(skills):
     assert not loose.step(np.zeros((2, 28))).pose_ended.any()
 
 
-@pytest.mark.parametrize("lib", ["numpy", "torch"])
-def test_count_down_lenience_by_hand(lib):
-    import torch
-
-    from charctl.experiments.cgail.rules import count_down_lenience
-
-    array = np.array if lib == "numpy" else torch.tensor
-    lenient = array([0, 3, 1, 0])
-    started = array([False, False, False, True])
-    assert count_down_lenience(lenient, started, 45).tolist() == [0, 2, 0, 45]
-
-
-def _first_pose_end_after_a_switch(skills, lenient: int, ramp: int = 4, grace: int = 2) -> int:
-    """Control steps after the ramp ends until a walk -> kick env (zero actions, 1 mm radius) is ended by the
-    pose check; env 1 stays on walk."""
-    cfg = OmegaConf.structured(EnvConfig(num_envs=2, ramp_frames=ramp, switch_prob=0.0))
-    env = CgailEnv(
-        skills, cfg, seed=0, pose_error_threshold=1e-3, pose_error_grace_steps=grace, restart_lenient_steps=lenient
-    )
-    env.forced_command = np.array([0, 0])
-    env.start_frame, env.random_yaw = 0, False
-    env.reset(np.arange(2))
-    env.set_command(np.array([0]), 1, ramp=True)  # the ramp ends in the step that brings w to 1 (the 4th)
-    for step in range(1, 40):
-        res = env.step(np.zeros((2, 28)))
-        assert not res.unstable[0] and env.fall_count == 0
-        if res.terminated[0]:
-            assert res.pose_ended[0]
-            return step - ramp
-    raise AssertionError("never ended")
-
-
-def _first_pose_end_after_a_clip_restart(skills, lenient: int, grace: int = 2) -> int:
-    """Control steps until a kick env whose reference is at the clip's last frame (so the first step restarts it
-    at frame 0) is ended by the pose check (zero actions, 1 mm radius)."""
-    cfg = OmegaConf.structured(EnvConfig(num_envs=2, ramp_frames=4, switch_prob=0.0))
-    env = CgailEnv(
-        skills, cfg, seed=0, pose_error_threshold=1e-3, pose_error_grace_steps=grace, restart_lenient_steps=lenient
-    )
-    env.forced_command = np.array([1, 1])
-    env.start_frame, env.random_yaw = 0, False
-    env.reset(np.arange(2))
-    env.ref_frame[:] = len(skills[1].obs) - 1
-    for step in range(1, 40):
-        res = env.step(np.zeros((2, 28)))
-        assert not res.unstable.any() and env.fall_count == 0
-        if res.terminated[0]:
-            assert res.pose_ended[0]
-            return step
-    raise AssertionError("never ended")
-
-
-def test_restart_lenient_steps_also_follow_a_non_looping_clip_restart(skills):
-    """Step 1 runs the kick past its end: frame 0, grace 2 (unchecked), and 6 lenient steps from the end of that
-    step. Grace reaches 0 in step 3 (ended there without lenience); lenience counts 6, 5, ..., 1 in steps 2..7 and
-    0 in step 8, where the episode ends."""
-    assert _first_pose_end_after_a_clip_restart(skills, lenient=0) == 3
-    assert _first_pose_end_after_a_clip_restart(skills, lenient=6) == 8
-
-
-def test_restart_lenient_steps_keep_the_pose_check_from_ending_a_switched_episode(skills):
-    """Without lenience the kick's reference, started in the ramp's last step with 2 grace steps (counted down by
-    each step's reference advance, before its check: 1 left in the 1st step after the ramp, 0 in the 2nd), is
-    checked from the 2nd step after the ramp and ends the episode there (1 mm radius). With 6 lenient steps
-    (counted down after each step's check) the check ends nothing in the 6 steps after the ramp and ends the
-    episode in the 7th."""
-    assert _first_pose_end_after_a_switch(skills, lenient=0) == 2
-    assert _first_pose_end_after_a_switch(skills, lenient=6) == 7
-
-
 @pytest.mark.parametrize("backend", ["cpu", pytest.param("warp", marks=needs_warp)])
 def test_learner_counts_pose_terminations_apart_from_falls(backend):
     """Both backends (the Warp env on the CPU here) end every step by the pose check at a 1 mm threshold."""
@@ -312,7 +242,6 @@ def test_learner_counts_pose_terminations_apart_from_falls(backend):
         ({"reward": {"pose_error_threshold": -0.1}}, "must be >= 0"),
         ({"reward": {"pose_error_grace_steps": -1}}, "must be >= 0"),
         ({"reward": {"low_style_threshold": 0.05, "kind": "tracking"}}, "needs reward.kind=adversarial"),
-        ({"reward": {"restart_lenient_steps": 45}}, "restart_lenient_steps must be >= 0, and > 0 only with"),
     ],
 )
 def test_config_errors(overrides, message):

@@ -124,15 +124,6 @@ class RewardConfig:
     pose_error_threshold: float = ranged(0.0, ge=0)
     # control steps after a reference restart with no check (time to reach frame 0)
     pose_error_grace_steps: int = ranged(10, ge=0)
-    # Control steps after each restart of the timed reference at frame 0 (a command ramp's end; a non-looping clip
-    # run past its end) in which the pose check may not end the episode; its tracking reward (reward.w_track) is
-    # paid as usual once the grace steps are over. 0 = the check applies after the grace steps as everywhere.
-    # Under the check an episode whose character is not already doing the clip when it restarts ends a few steps
-    # after the grace steps, so neither a switch into a skill nor a second kick from the policy's own guard is ever
-    # practised (scripts/diag_switch.py: the ten-skill policy's walk -> right_kick episodes all end 12-19 steps after
-    # the ramp; it kicks once from the clip's first frame and never again). Needs pose_error_threshold > 0.
-    # docs/cgail.md, "Lenient steps after a restart".
-    restart_lenient_steps: int = ranged(0, ge=0)
     # Root-height radius (m) of the pose-error check: > 0 ends an episode also where the root height differs from the
     # reference's by more than this, so a jump done on the ground (its clip's root rises 0.29 m above the stance)
     # is ended at the clip's flight. 0 = the root height counts against pose_error_threshold like a hand or foot.
@@ -266,7 +257,6 @@ class Config(BaseConfig):
                 "reward.root_height_threshold",
                 "reward.yaw_error_threshold",
                 "reward.goal_reference_window",
-                "reward.restart_lenient_steps",
                 "reward.w_track",
                 "reward.w_track_skills",
             ]
@@ -325,8 +315,6 @@ def _check_rewards(cfg) -> str | None:
         return "reward.yaw_error_threshold must be >= 0, and > 0 only with reward.pose_error_threshold > 0"
     if r.goal_reference_window > 0 and r.pose_error_threshold <= 0:
         return "reward.goal_reference_window must be >= 0, and > 0 only with reward.pose_error_threshold > 0"
-    if r.restart_lenient_steps > 0 and r.pose_error_threshold <= 0:
-        return "reward.restart_lenient_steps must be >= 0, and > 0 only with reward.pose_error_threshold > 0"
     # w_track's >= 0 stays here, undeclared: tests/test_config_help.py pins w_track as a knob with no declared range
     if r.w_track < 0 or (r.w_track > 0 and r.pose_error_threshold <= 0):
         return "reward.w_track must be >= 0, and > 0 only with reward.pose_error_threshold > 0 (its reference)"

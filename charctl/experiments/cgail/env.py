@@ -40,7 +40,6 @@ from charctl.experiments.cgail.rules import (
     advance_ramp,
     advance_reference,
     count_down_grace,
-    count_down_lenience,
     episode_end,
     goal_features,
     goal_reference_frame,
@@ -77,7 +76,6 @@ class CgailEnv:
         root_height_threshold: float = 0.0,
         yaw_error_threshold: float = 0.0,
         goal_reference_window: int = 0,
-        restart_lenient_steps: int = 0,
         reference_reward: bool = False,
         device=None,
         sim=None,
@@ -92,7 +90,6 @@ class CgailEnv:
         self.root_scale = root_height_scale(self.pose_threshold, float(root_height_threshold))
         self.yaw_scale = yaw_scale(self.pose_threshold, float(yaw_error_threshold))  # 0: no heading check
         self.goal_window = int(goal_reference_window)  # 0: heading-goal skills scored against the closest frame
-        self.restart_lenient = int(restart_lenient_steps)  # steps after a restart in which the check ends nothing
         self.reference_reward = bool(reference_reward)  # r_track against that reference (reward.w_track)
         # env.phase_obs: the timed reference's phase in the state of the adversarial policy (training and evaluation)
         self.phase_obs = bool(getattr(env_cfg, "phase_obs", False)) and not tracking
@@ -158,8 +155,6 @@ class CgailEnv:
         self.ref_frame = a.zeros(N, i64)  # reference clip frame at the current phase
         self.ref_active = a.array([True] * N, a.bool_dtype)  # pose-error check: reference valid (off during a switch)
         self.ref_grace = a.zeros(N, i64)  # pose-error check: steps left without a check
-        self.ref_lenient = a.zeros(N, i64)  # pose-error check: steps left in which it ends no episode (a restart)
-        self.clip_restarted = a.zeros(N, a.bool_dtype)  # this step's reference went past its clip's end to frame 0
         self.yaw_err = a.zeros(N, f)  # reward.yaw_error_threshold: heading gained on the reference (rad)
         self.fall_rate = a.array([0.5] * self.K, f64)  # per-skill recent failure rate (env.skill_fall_weight)
         # env.start_failure_weight: failures per skill and reference frame (start_frames.py)
@@ -241,7 +236,6 @@ class CgailEnv:
         self.ref_frame = rows.put(self.ref_frame, frames)
         self.ref_active = rows.put(self.ref_active, True)
         self.ref_grace = rows.put(self.ref_grace, 0)
-        self.ref_lenient = rows.put(self.ref_lenient, 0)
         self.yaw_err = rows.put(self.yaw_err, 0.0)
         k = self.arrays.kinematics(None if isinstance(rows, MaskRows) else rows)
         self.goal_angle = rows.put(self.goal_angle, R.yaw_about_y(k.body_rot[:, 0]) + goal_offset)
@@ -280,7 +274,6 @@ class CgailEnv:
         )
         if restart:
             self.ref_grace = count_down_grace(self.ref_grace, again, self.pose_grace)
-            self.clip_restarted = again
         return self._reference_obs(), ended
 
     def _reference_obs(self, frames=None):
@@ -309,16 +302,10 @@ class CgailEnv:
         return rows.put(timed, closest), rows.put(ref, self.ref_obs[cmd, best])
 
     def _restart_reference_after_ramp(self) -> None:
-        """Envs whose command ramp has just finished: the new clip's reference starts at frame 0. With
-        reward.restart_lenient_steps, the pose check ends no episode for that many steps after this restart or
-        after this step's restart of a non-looping clip (`clip_restarted`); counted down here, once a step."""
-        was_active = self.ref_active
+        """Envs whose command ramp has just finished: the new clip's reference starts at frame 0."""
         self.ref_frame, self.ref_grace, self.ref_active = restart_after_ramp(
             self.ref_frame, self.ref_grace, self.ref_active, self.w, self.pose_grace
         )
-        if self.restart_lenient > 0:
-            started = (self.ref_active & ~was_active) | self.clip_restarted
-            self.ref_lenient = count_down_lenience(self.ref_lenient, started, self.restart_lenient)
 
     @property
     def state(self):

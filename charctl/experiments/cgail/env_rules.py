@@ -18,7 +18,7 @@ from charctl.experiments.cgail.rules import reference_check
 def env_rules(reward, **overrides: Any) -> dict[str, Any]:
     """Env keyword arguments for the reward config `reward` (a `Config.reward` node), `overrides` replacing
     single entries (a diagnostic that varies one rule). Units: thresholds in m (pose, root height) and rad
-    (yaw), grace and lenient steps in control steps, the window in clip frames (0: the closest frame anywhere)."""
+    (yaw), grace in control steps, the window in clip frames (0: the closest frame anywhere)."""
     rules = dict(
         tracking=str(reward.kind) == "tracking",
         pose_error_threshold=float(reward.pose_error_threshold),
@@ -26,7 +26,6 @@ def env_rules(reward, **overrides: Any) -> dict[str, Any]:
         root_height_threshold=float(reward.root_height_threshold),
         yaw_error_threshold=float(reward.yaw_error_threshold),
         goal_reference_window=int(reward.goal_reference_window),
-        restart_lenient_steps=int(reward.restart_lenient_steps),
         reference_reward=float(reward.w_track) > 0 or any(float(v) > 0 for v in reward.w_track_skills.values()),
     )
     unknown = set(overrides) - set(rules)
@@ -48,6 +47,4 @@ def env_reference_check(
     r_track, pose_ended, _, env.yaw_err = reference_check(
         err, scored, pair_next, ref, r_track, *per_env, **rule, reference_reward=env.reference_reward
     )
-    if env.restart_lenient > 0:  # reward.restart_lenient_steps: no pose-check end just after a restart
-        pose_ended = pose_ended & (env.ref_lenient == 0)
     return r_track, pose_ended, scored

@@ -315,14 +315,6 @@ def count_down_grace(ref_grace: Array, restarted: Array, grace: int) -> Array:
     return xp.where(restarted, xp.full_like(ref_grace, grace), xp.maximum(ref_grace - 1, xp.zeros_like(ref_grace)))
 
 
-def count_down_lenience(lenient: Array, started: Array, steps: int) -> Array:
-    """(N,) control steps left in which the pose check may not end the episode (reward.restart_lenient_steps):
-    `steps` where the timed reference has just restarted at frame 0 (`started` (N,) bool: after a command ramp,
-    `restart_after_ramp`, or past a non-looping clip's end, `advance_reference`), else one fewer (not below 0)."""
-    xp = namespace(lenient, started)
-    return xp.where(started, xp.full_like(lenient, steps), xp.maximum(lenient - 1, xp.zeros_like(lenient)))
-
-
 def pose_check(
     ref_active: Array, ref_grace: Array, fell: Array, unstable: Array, err: Array, threshold: float
 ) -> tuple[Array, Array]:
