@@ -37,9 +37,11 @@ def test_each_cause_is_counted_for_its_own_radius(radii, cause):
     assert (m["worst"] != "-") == (cause == "effector")
 
 
-@pytest.mark.parametrize(("script", "option"), [("diag_terminations", "--skills"), ("diag_switch", "--to")])
+@pytest.mark.parametrize(
+    ("script", "option"), [("diag_terminations", "--skills"), ("diag_switch", "--to"), ("diag_kick_start", "--skill")]
+)
 def test_an_unknown_skill_is_a_one_line_error(script, option):
-    """Both diagnostics that replay a run under its training rules name the run's skills for a wrong one."""
+    """The diagnostics that replay a run's skills name the run's skills for a wrong one."""
     res = subprocess.run(
         [sys.executable, str(REPO / f"scripts/{script}.py"), str(RUN), option, "kick"],
         capture_output=True,
