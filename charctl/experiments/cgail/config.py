@@ -79,12 +79,6 @@ class EnvConfig:
     start_failure_weight: float = ranged(0.0, ge=0, le=1)
     start_failure_lead: int = ranged(10, ge=0)  # control frames (0.33 s at 30 Hz)
     start_failure_halflife: float = ranged(300.0, gt=0)  # control steps after which the failure counts have halved
-    # Std (rad) of Gaussian noise added to every hinge angle of a training episode's RSI state (the root's position,
-    # orientation and all velocities kept): starts near the clip's state rather than exactly on it, so a skill is
-    # learned from a neighbourhood of its clip's frames (the ten-skill kick starts only within ~0.1 rad of its first
-    # pose, scripts/diag_kick_start.py). Evaluation envs start exactly on the clip. 0 = off (the paper).
-    # docs/cgail.md, "It kicks once".
-    rsi_joint_noise: float = ranged(0.0, ge=0)
     action_scale: float = ranged(1.0, gt=0)  # PD target (rad) = rest pose + action_scale * action
     fall_tolerance: float = ranged(0.005, ge=0)  # m: a non-foot body this close to the ground ends the episode (a fall)
     goal_max_angle_deg: float = 45.0  # new heading goals lie within +- this angle of the current heading
@@ -279,11 +273,6 @@ class Config(BaseConfig):
             if (msg := group(cfg)) is not None:
                 return msg
         return None
-
-
-# env keys that are training rules: evaluation envs (`policy.TrainedRun.make_env` without rules, `fidelity`) reset
-# them, so a policy is judged from uniform RSI starts exactly on its clips
-EVALUATION_ENV = {"start_failure_weight": 0.0, "rsi_joint_noise": 0.0}
 
 
 def method_label(cfg) -> str:

@@ -221,8 +221,6 @@ class CgailEnv:
         skill, frames, yaw, goal_offset = draws
         qpos = self.rsi_qpos[skill, frames]  # advanced indexing: copies
         qvel = self.rsi_qvel[skill, frames]
-        if self.cfg.rsi_joint_noise > 0:  # training starts near the clip's state (hinge angles only)
-            qpos[:, 7:] = qpos[:, 7:] + self.arrays.normal(tuple(qpos[:, 7:].shape), self.cfg.rsi_joint_noise)
         R = rotations_for(qpos)
         turn = R.heading_quat(yaw)
         qpos[:, 0] = 0.0

@@ -81,10 +81,6 @@ class HostArrays:
             return self.rng.integers(0, K, size=n)
         return self.rng.choice(K, size=n, p=skill_probabilities(fall_rate, fall_weight))
 
-    def normal(self, shape: tuple[int, ...], std: float) -> np.ndarray:
-        """N(0, std) draws of `shape` (float64)."""
-        return self.rng.normal(0.0, std, size=shape)
-
     def symmetric(self, rows: IndexRows, half_width: float) -> np.ndarray:
         """(n,) uniform in [-half_width, half_width)."""
         return self.rng.uniform(-half_width, half_width, size=len(rows.ids))
@@ -192,10 +188,6 @@ class TorchArrays:
             return torch.floor(self._rand(n) * K).long().clamp(min=0)
         p = skill_probabilities(fall_rate, fall_weight)
         return torch.multinomial(p, n, replacement=True, generator=self.generator)
-
-    def normal(self, shape: tuple[int, ...], std: float) -> torch.Tensor:
-        """N(0, std) draws of `shape` in the simulator's dtype."""
-        return torch.randn(shape, generator=self.generator, device=self.device, dtype=self.dtype) * std
 
     def symmetric(self, rows: IndexRows | MaskRows, half_width: float) -> torch.Tensor:
         return rows.pick(self._symmetric_all(half_width))

@@ -37,7 +37,6 @@ from charctl.eval.fidelity import (
     signature,
     standing_sole_height,
 )
-from charctl.experiments.cgail.config import EVALUATION_ENV
 from charctl.experiments.cgail.drive import policy_steps
 from charctl.viz.video import check_can_render  # noqa: F401  re-exported (eval_checkpoints.py)
 
@@ -121,7 +120,7 @@ def _make_env(agent, num_envs: int, seed: int, episode_seconds: float):
 
     env_cfg = OmegaConf.merge(
         agent.cfg.env,
-        {"num_envs": num_envs, "switch_prob": 0.0, "episode_seconds": episode_seconds, **EVALUATION_ENV},
+        {"num_envs": num_envs, "switch_prob": 0.0, "episode_seconds": episode_seconds, "start_failure_weight": 0.0},
     )
     env = CgailEnv(
         agent.skills,
