@@ -1,6 +1,7 @@
 """Where does a kick start from? The skill's foot peak per pass of its clip, and how it depends on the start state.
 
     .venv/bin/python scripts/diag_kick_start.py RUN [--skill right_kick] [--envs 8] [--passes 3]
+                                                [--checkpoint samples_N.pt]
 
 Evaluation rules (falls only, mean actions), the skill held, every env started at its clip's frame 0 (RSI, heading 0).
 Two tables:
@@ -126,11 +127,12 @@ def main() -> None:
     ap.add_argument("--skill", default="right_kick")
     ap.add_argument("--envs", type=int, default=8)
     ap.add_argument("--passes", type=int, default=3, help="passes of the clip in the first table")
+    ap.add_argument("--checkpoint", default=None, help="a file in RUN/checkpoints/ (default last.pt)")
     args = ap.parse_args()
     if args.envs < 1 or args.passes < 1:
         raise SystemExit("error: --envs and --passes must be >= 1")
     try:
-        run = load_eval_run(args.run, device="cpu")
+        run = load_eval_run(args.run, device="cpu", checkpoint=args.checkpoint)
         k = run.skill_index(args.skill)
     except CharctlError as exc:
         raise SystemExit(f"error: {exc}") from None
