@@ -21,7 +21,8 @@ import argparse
 
 import numpy as np
 
-PERFORMED = 0.8  # share of the clip's foot peak that counts as the kick done (metrics.PERFORM_SHARE)
+from charctl.experiments.cgail.metrics import PERFORM_SHARE, clip_foot_peak, foot_peaks
+
 START_VARIANTS = (  # (label, joint-angle noise std rad, velocity scale)
     ("as recorded", 0.0, 1.0),
     ("velocities x0.5", 0.0, 0.5),
@@ -41,15 +42,6 @@ def perturbed_start(
     if noise > 0:
         q[7:] += rng.normal(0.0, noise, q[7:].shape)
     return q, qvel * vel_scale
-
-
-def _foot_peaks(pos: list, rot: list, hz: float) -> np.ndarray:
-    """(envs,) the higher foot's peak (m) over the recorded frames (`signature`'s foot peaks)."""
-    from charctl.eval.fidelity import signature
-
-    p, r = np.asarray(pos), np.asarray(rot)
-    sig = signature(p.swapaxes(0, 1), r.swapaxes(0, 1), 1.0 / hz)
-    return np.maximum(sig["right_foot_peak"], sig["left_foot_peak"])
 
 
 def _env(run, k: int, envs: int, seconds: float):
@@ -78,7 +70,7 @@ def passes(run, k: int, envs: int, n_passes: int) -> list[dict]:
         pos.append(env.sim.body_pos.copy())
         rot.append(env.sim.body_quat_xyzw.copy())
         if (step.t + 1) % clip_len == 0:  # the clip's last frame has been played: the next step restarts it
-            out.append({**start, "foot_peak": _foot_peaks(pos, rot, hz), "alive": alive.copy()})
+            out.append({**start, "foot_peak": foot_peaks(np.asarray(pos), np.asarray(rot), hz), "alive": alive.copy()})
             start = {"distance": reference_pose_error(env.obs, ref0), "root_height": env.obs[:, 0].copy()}
             pos, rot = [], []
     return out
@@ -104,18 +96,8 @@ def start_sensitivity(run, k: int, envs: int, seed: int = 0) -> list[tuple[str, 
             alive &= ~step.result.terminated
             pos.append(env.sim.body_pos.copy())
             rot.append(env.sim.body_quat_xyzw.copy())
-        rows.append((label, _foot_peaks(pos, rot, hz), alive))
+        rows.append((label, foot_peaks(np.asarray(pos), np.asarray(rot), hz), alive))
     return rows
-
-
-def clip_foot_peak(run, k: int) -> float:
-    """The clip's higher foot peak (m), as the fidelity evaluation measures it."""
-    from charctl.eval.fidelity import signature
-    from charctl.experiments.cgail.fidelity import clip_reference
-
-    ref = clip_reference(run.agent.skills[k])
-    sig = signature(ref.body_pos, ref.body_rot, ref.dt, ref.ground)
-    return float(max(sig["right_foot_peak"], sig["left_foot_peak"]))
 
 
 def main() -> None:
@@ -136,10 +118,10 @@ def main() -> None:
         k = run.skill_index(args.skill)
     except CharctlError as exc:
         raise SystemExit(f"error: {exc}") from None
-    clip = clip_foot_peak(run, k)
+    clip = clip_foot_peak(run.agent.skills[k])
     print(f"{args.run}: {args.skill} held from its clip's frame 0, {args.envs} envs; clip foot peak {clip:.2f} m")
     for i, p in enumerate(passes(run, k, args.envs, args.passes), 1):
-        done = int(((p["foot_peak"] >= PERFORMED * clip) & p["alive"]).sum())
+        done = int(((p["foot_peak"] >= PERFORM_SHARE * clip) & p["alive"]).sum())
         print(
             f"  pass {i}: foot peak {p['foot_peak'].mean():.2f} m, kicked {done}/{args.envs}; at its start "
             f"{p['distance'].mean():.2f} m from frame 0, root {p['root_height'].mean():.3f} m "
@@ -147,7 +129,7 @@ def main() -> None:
         )
     print("  first pass from a changed start state:")
     for label, peak, alive in start_sensitivity(run, k, args.envs):
-        done = int(((peak >= PERFORMED * clip) & alive).sum())
+        done = int(((peak >= PERFORM_SHARE * clip) & alive).sum())
         print(f"    {label:20s} foot peak {peak.mean():.2f} m (min {peak.min():.2f}), kicked {done}/{args.envs}")
 
 

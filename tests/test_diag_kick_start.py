@@ -36,9 +36,9 @@ def test_the_three_skill_kick_is_done_on_its_first_pass_from_the_clip_state():
     assert len(out) == 2
     np.testing.assert_allclose(out[0]["distance"], 0.0, atol=1e-9)
     assert (out[1]["distance"] > 0.05).all()  # the policy's own guard is not the clip's frame 0
-    clip = mod.clip_foot_peak(run, k)
+    clip = mod.clip_foot_peak(run.agent.skills[k])
     assert 1.0 < clip < 1.5  # the kick clip's foot, 1.28 m (docs/cgail.md)
-    assert (out[0]["foot_peak"] >= mod.PERFORMED * clip).all() and out[0]["alive"].all()
+    assert (out[0]["foot_peak"] >= mod.PERFORM_SHARE * clip).all() and out[0]["alive"].all()
     label, peak, alive = mod.start_sensitivity(run, k, envs=2)[0]
     assert label == "as recorded" and alive.all()
     np.testing.assert_allclose(peak, out[0]["foot_peak"], atol=1e-9)

@@ -106,22 +106,35 @@ PERFORM_SECONDS = 3.0  # the window after a switch in which the new skill must b
 PERFORM_SHARE = 0.8  # done = the higher foot reaches this share of the clip's highest foot, without a fall
 
 
+def clip_foot_peak(skill) -> float:
+    """The higher foot's peak (m) of `skill`'s clip (a `SkillData`), as the fidelity signature measures it."""
+    from charctl.eval.fidelity import signature
+    from charctl.experiments.cgail.fidelity import clip_reference
+
+    ref = clip_reference(skill)
+    sig = signature(ref.body_pos, ref.body_rot, ref.dt, ref.ground)
+    return float(max(sig["right_foot_peak"], sig["left_foot_peak"]))
+
+
+def foot_peaks(pos: np.ndarray, rot: np.ndarray, hz: float, lengths: np.ndarray | None = None) -> np.ndarray:
+    """(N,) the higher foot's peak (m) per trial over recorded frames: `pos` / `rot` (F, N, 15, ...) world bodies at
+    `hz` frames per second; `lengths` (N,) frames to count per trial (None: all F)."""
+    from charctl.eval.fidelity import signature
+
+    sig = signature(pos.swapaxes(0, 1), rot.swapaxes(0, 1), 1.0 / hz, lengths=lengths)
+    return np.maximum(sig["right_foot_peak"], sig["left_foot_peak"])
+
+
 def performed_after_switch(
     tr: TrainedRun, kb: int, pos: np.ndarray, rot: np.ndarray, alive_hist: np.ndarray, t_switch: int
 ) -> dict:
     """Whether skill `kb` is seen done in the `PERFORM_SECONDS` after a switch to it: per trial the higher
     foot's peak height (m) over the frames before any fall, against the clip's. `pos` / `rot` (F, N, 15, ...)
     world bodies of the F frames after the switch; `alive_hist` (T, N) alive before each step."""
-    from charctl.eval.fidelity import signature
-    from charctl.experiments.cgail.fidelity import clip_reference
-
-    ref = clip_reference(tr.agent.skills[kb])
-    clip_sig = signature(ref.body_pos, ref.body_rot, ref.dt, ref.ground)
-    clip_peak = max(clip_sig["right_foot_peak"], clip_sig["left_foot_peak"])
+    clip_peak = clip_foot_peak(tr.agent.skills[kb])
     alive_after = alive_hist[t_switch : t_switch + len(pos)].T  # (N, F)
     lengths = np.where(alive_after.all(axis=1), alive_after.shape[1], alive_after.argmin(axis=1))
-    sig = signature(pos.swapaxes(0, 1), rot.swapaxes(0, 1), 1.0 / tr.cfg.env.control_hz, lengths=np.maximum(lengths, 1))
-    peak = np.maximum(sig["right_foot_peak"], sig["left_foot_peak"])
+    peak = foot_peaks(pos, rot, tr.cfg.env.control_hz, lengths=np.maximum(lengths, 1))
     ok = (peak >= PERFORM_SHARE * clip_peak) & alive_after.all(axis=1)
     return {
         "foot_peak": peak.tolist(),
