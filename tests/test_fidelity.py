@@ -14,9 +14,11 @@ from charctl.errors import CharctlError
 from charctl.eval.fidelity import (
     body_error_and_coverage,
     foot_sole_heights,
+    frame_match,
     heading_positions,
     signature,
     tile_index,
+    uncovered_spans,
 )
 from charctl.motion import rotations as R
 
@@ -92,6 +94,72 @@ def test_mirrored_kick_scores_one_against_itself_and_swaps_the_feet(refs):
         assert a[f"left_{side}_peak"] == pytest.approx(b[f"right_{other}_peak"], abs=1e-9)
     for key in ("airborne", "speed", "yaw_rate"):
         assert a[key] == pytest.approx(b[key], abs=1e-9)
+
+
+def test_frame_match_on_hand_values():
+    """Clip of 3 frames, 2 bodies; a sequence of 2 frames. Clip frame 0 is matched exactly by sequence frame 0;
+    frame 1 is 0.3 m from either sequence frame at its farthest body (body 1 of seq frame 1, 0.1 m at body 0);
+    frame 2's best match is seq frame 1 with body 0 off by 0.2 m (body 1 exact)."""
+    clip = np.zeros((3, 2, 3))
+    clip[1] = [[0.1, 0, 0], [0, 0.6, 0]]
+    clip[2] = [[0.2, 0, 0], [0, 0.3, 0]]
+    seq = np.zeros((2, 2, 3))
+    seq[1] = [[0.0, 0, 0], [0, 0.3, 0]]
+    dist, body = frame_match(seq, clip)
+    # seq 0 against clip 1: bodies 0.1 / 0.6 -> 0.6; seq 1: 0.1 / 0.3 -> 0.3 (body 1)
+    assert np.allclose(dist, [0.0, 0.3, 0.2])
+    assert body[1:].tolist() == [1, 0]
+    # its covered share is the coverage of body_error_and_coverage, at any tolerance
+    for tol in (0.15, 0.25, 0.35):
+        assert np.mean(dist <= tol) == body_error_and_coverage(seq, clip, tol=tol)[1]
+
+
+def test_uncovered_spans_by_hand():
+    assert uncovered_spans(np.array([True, False, False, True, False])) == [(1, 2), (4, 4)]
+    assert uncovered_spans(np.ones(4, dtype=bool)) == []
+    assert uncovered_spans(np.zeros(3, dtype=bool)) == [(0, 2)]
+
+
+def test_frame_report_of_a_frozen_guard_against_the_kick(refs):
+    """A character frozen in the kick's first pose covers the clip's frames within 0.15 m of that pose and
+    nothing else (distances checked against the direct body distances); the clip replayed covers every frame."""
+    from charctl.eval.fidelity import body_distances
+    from charctl.experiments.cgail.fidelity import frame_report, uncovered_cell
+
+    kick = refs["right_kick"]
+    frozen = np.repeat(kick.rel[:1], 20, axis=0)[None]
+    rep = frame_report(frozen, np.array([20]), kick)
+    direct = body_distances(kick.rel[:1], kick.rel)[0].max(axis=-1)  # (m,)
+    assert np.allclose(rep["distance"][0], direct, atol=1e-4)
+    covered = direct <= 0.15
+    assert rep["covered_share"] == covered.astype(float).tolist()
+    assert [(s["first"], s["last"]) for s in rep["uncovered"]] == uncovered_spans(covered)
+    first = rep["uncovered"][0]
+    assert first["t0"] == pytest.approx(first["first"] / 30.0) and first["peak_m"] > 0.15
+    from charctl.motion.skeleton import load_skeleton
+
+    span_bodies = body_distances(kick.rel[:1], kick.rel[first["first"] : first["last"] + 1])[0].argmax(axis=-1)
+    assert first["body"] == load_skeleton().names[np.bincount(span_bodies).argmax()]
+    assert first["peak_m"] == pytest.approx(direct[first["first"] : first["last"] + 1].max(), abs=1e-4)
+    assert uncovered_cell(rep["uncovered"]).startswith(f"{first['t0']:.2f}-{first['t1']:.2f} s {first['body']}")
+    assert frame_report(kick.rel[None], np.array([len(kick.rel)]), kick)["uncovered"] == []
+
+
+def test_uncovered_cell_keeps_the_longest_spans_in_clip_order():
+    from charctl.experiments.cgail.fidelity import uncovered_cell
+
+    spans = [
+        {"first": f, "last": l, "t0": f / 10, "t1": l / 10, "body": b, "peak_m": p}
+        for f, l, b, p in [
+            (0, 0, "neck", 0.2),
+            (3, 9, "left_wrist", 0.354),
+            (12, 14, "right_ankle", 0.25),
+            (20, 21, "chest", 0.16),
+        ]
+    ]
+    assert uncovered_cell(spans, most=2) == "0.30-0.90 s left_wrist 0.35 m; 1.20-1.40 s right_ankle 0.25 m; +2 more"
+    assert uncovered_cell(spans[:1]) == "0.00 s neck 0.20 m"
+    assert uncovered_cell([]) == "-"
 
 
 def _hand_built(T: int = 40, dt: float = 0.1, v: float = 2.0, omega: float = 0.5):
@@ -171,12 +239,16 @@ def test_shipped_policy_end_to_end(tmp_path, monkeypatch):
     assert set(result["skills"]) == set(skills)
     report = (out / "report.md").read_text()
     assert "## Fidelity" in report and "| right_kick |" in report
+    assert (out / "fidelity_frames.png").stat().st_size > 10_000 and "(fidelity_frames.png)" in report
+    assert "not covered (clip s, farthest body, m)" in report
     kick = result["skills"]["right_kick"]
     assert kick["reference"]["right_foot_peak"] == pytest.approx(1.28, abs=0.01)
     # the fidelity policy kicks (its eval/report.md: 1.27 m over 4 episodes); the old cgail-3skill reached 0.17 m
     assert 0.8 * 1.28 <= kick["policy"]["right_foot_peak"] < 2.0
     for s in skills:
         assert 0.0 <= result["skills"][s]["coverage"] <= 1.0 and result["skills"][s]["body_error"] > 0.0
+        frames = result["skills"][s]["frames"]  # one episode: its covered frames' share is its coverage
+        assert np.mean(frames["covered_share"]) == pytest.approx(result["skills"][s]["coverage"])
 
     scalars = fid.training_fidelity(loaded[0].agent, num_envs=1)
     expected = {

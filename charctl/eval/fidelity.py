@@ -13,6 +13,8 @@ arrays: no loop over bodies or frames in Python.
   the error is the mean cost over the aligned frame pairs; (b) pose coverage: the share of the clip's
   frames that some frame of the sequence matches within `COVERAGE_TOL` = 0.15 m at every body (the
   maximum over bodies of the distance <= 0.15 m).
+- `frame_match` / `uncovered_spans`: the same match per clip frame (distance and farthest body), and the
+  stretches of the clip that are not covered: where a policy departs from its clip and by which body.
 - `signature`: peak height of each foot and hand, airborne share, mean horizontal root speed and mean
   absolute yaw rate (see its docstring for the definitions and the airborne threshold).
 """
@@ -70,6 +72,31 @@ def tile_index(frames: int, clip_frames: int, loop: bool) -> np.ndarray:
     return np.concatenate([np.tile(np.arange(clip_frames - 1), reps), [clip_frames - 1]])[:frames]
 
 
+def _best_match(d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """From (n, m, B) distances: per clip frame j, the smallest over the n sequence frames of the farthest
+    body's distance (m,) in m, and the index (m,) of that farthest body in the best-matching frame."""
+    worst = d.max(axis=-1)  # (n, m): the farthest body
+    best = worst.argmin(axis=0)
+    cols = np.arange(d.shape[1])
+    return worst[best, cols], d[best, cols].argmax(axis=-1)
+
+
+def frame_match(seq: np.ndarray, clip: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Which parts of the clip a sequence does: per clip frame, (distance (m,) in m, body (m,) index).
+
+    `seq` (n, B, 3) and `clip` (m, B, 3) are heading-frame positions (`heading_positions`). The distance
+    of clip frame j is that of its best-matching sequence frame, measured at the body farthest from the
+    clip there; `body` names that body. Frame j counts as covered when the distance is <= `COVERAGE_TOL`,
+    so the mean of (distance <= COVERAGE_TOL) is `body_error_and_coverage`'s coverage."""
+    return _best_match(body_distances(seq, clip))
+
+
+def uncovered_spans(covered: np.ndarray) -> list[tuple[int, int]]:
+    """Runs of consecutive False in a (m,) bool array, as (first, last) frame indices, last inclusive."""
+    edges = np.diff(np.concatenate([[1], np.asarray(covered, dtype=np.int8), [1]]))
+    return list(zip(np.flatnonzero(edges == -1).tolist(), (np.flatnonzero(edges == 1) - 1).tolist()))
+
+
 def body_error_and_coverage(
     seq: np.ndarray, clip: np.ndarray, loop: bool = False, tol: float = COVERAGE_TOL
 ) -> tuple[float, float]:
@@ -79,8 +106,7 @@ def body_error_and_coverage(
     reference is the clip, tiled to n frames when it loops (`tile_index`); coverage counts the clip's
     own m frames."""
     d = body_distances(seq, clip)  # (n, m, B)
-    worst = d.max(axis=-1)  # (n, m): the farthest body
-    coverage = float(np.mean(worst.min(axis=0) <= tol))
+    coverage = float(np.mean(_best_match(d)[0] <= tol))
     cost = d.mean(axis=-1)[:, tile_index(len(seq), len(clip), loop)]
     i, j, _ = dtw_align(cost)
     return float(cost[i, j].mean()), coverage

@@ -15,6 +15,9 @@ the mirrored one):
   yaw rate, policy and clip. Episode values are averaged over the k episodes.
 - (d) a filmstrip per skill: 8 clip frames spread over the clip, and above them the policy's first
   episode at the same times and the policy's closest pose to each (by the farthest body's distance).
+- where the policy departs from the clip: per clip frame, the distance of its best match in each episode
+  (farthest body), the stretches of the clip that fewer than half of the episodes cover with the body
+  farthest there (a table column), and a plot of it for every skill (`fidelity_frames.png`).
 
 `training_fidelity` is the cheap form for the learner: the same numbers as scalars for TensorBoard.
 """
@@ -33,16 +36,20 @@ from charctl.eval.fidelity import (
     PEAK_KEYS,
     body_distances,
     body_error_and_coverage,
+    frame_match,
     heading_positions,
     signature,
     standing_sole_height,
+    uncovered_spans,
 )
 from charctl.experiments.cgail.drive import policy_steps
+from charctl.viz.frame_match import FramePanel, plot_frame_match
 from charctl.viz.video import check_can_render  # noqa: F401  re-exported (eval_checkpoints.py)
 
 EPISODE_SECONDS = 5.0  # minimum episode length; longer clips get one clip length
 FILMSTRIP_FRAMES = 8
 SIGNATURE_KEYS = (*PEAK_KEYS, "airborne", "speed", "yaw_rate")
+NOT_COVERED = "not covered (clip s, farthest body, m)"  # the report column of `uncovered_cell`
 
 
 @dataclass
@@ -172,6 +179,53 @@ def record_rollouts(
     return out
 
 
+def frame_report(rel: np.ndarray, lengths: np.ndarray, ref: ClipReference) -> dict:
+    """Which frames of the clip the E episodes do. `rel` (E, T, 15, 3) heading-frame positions, `lengths` (E,)
+    valid frames. Per clip frame: `distance` (E, m) of its best match in each episode (m, at the farthest
+    body), `body` (E, m) that body's index, `covered_share` (m,) of the episodes within `COVERAGE_TOL`; and
+    `uncovered`: each stretch of clip frames fewer than half of the episodes cover, as first / last frame,
+    t0 / t1 (s), the body most often farthest there, and the largest median distance there (`peak_m`)."""
+    from charctl.motion.skeleton import load_skeleton
+
+    names = load_skeleton().names
+    dist, body = (np.stack(x) for x in zip(*(frame_match(rel[e, :n], ref.rel) for e, n in enumerate(lengths))))
+    share = (dist <= COVERAGE_TOL).mean(axis=0)
+    median = np.median(dist, axis=0)
+    spans = []
+    for a, b in uncovered_spans(share >= 0.5):
+        off = body[:, a : b + 1][dist[:, a : b + 1] > COVERAGE_TOL]
+        spans.append(
+            {
+                "first": a,
+                "last": b,
+                "t0": a * ref.dt,
+                "t1": b * ref.dt,
+                "body": names[int(np.bincount(off).argmax())],
+                "peak_m": float(median[a : b + 1].max()),
+            }
+        )
+    return {
+        "distance": np.round(dist, 4).tolist(),
+        "body": body.tolist(),
+        "covered_share": share.tolist(),
+        "uncovered": spans,
+    }
+
+
+def uncovered_cell(spans: list[dict], most: int = 3) -> str:
+    """The report's cell for `frame_report`'s spans: the `most` longest, in clip order, e.g.
+    "0.27-1.10 s left_wrist 0.35 m"; "-" when every frame is covered."""
+    if not spans:
+        return "-"
+    longest = sorted(sorted(spans, key=lambda s: s["first"] - s["last"])[:most], key=lambda s: s["first"])
+    cell = "; ".join(
+        (f"{s['t0']:.2f} s" if s["first"] == s["last"] else f"{s['t0']:.2f}-{s['t1']:.2f} s")
+        + f" {s['body']} {s['peak_m']:.2f} m"
+        for s in longest
+    )
+    return cell + (f"; +{len(spans) - most} more" if len(spans) > most else "")
+
+
 def score_recording(rec: Recording, ref: ClipReference) -> dict:
     """The fidelity numbers of one skill's episodes against its clip (episode values averaged)."""
     rel = heading_positions(rec.body_pos, rec.body_rot[..., 0, :])
@@ -188,6 +242,7 @@ def score_recording(rec: Recording, ref: ClipReference) -> dict:
         "episodes": len(rec.lengths),
         "seconds_recorded": float((rec.lengths.mean() - 1) * rec.dt),
         "episode_seconds": ref.episode_seconds,
+        "frames": frame_report(rel, rec.lengths, ref),
         "per_episode": {
             "coverage": coverages.tolist(),
             "body_error": errors.tolist(),
@@ -250,6 +305,7 @@ def eval_fidelity(runs: list, episodes: int, out: Path, seed: int = 2468, filmst
         label = tr.label if labels.count(tr.label) == 1 else tr.run_dir.name
         refs = [clip_reference(s) for s in tr.agent.skills]
         recs = record_rollouts(tr, list(range(len(refs))), episodes, [r.episode_seconds for r in refs], seed=seed)
+        panels = []
         for rec, ref in zip(recs, refs):
             key = f"{ref.skill} ({label})" if several else ref.skill
             res = score_recording(rec, ref)
@@ -268,6 +324,13 @@ def eval_fidelity(runs: list, episodes: int, out: Path, seed: int = 2468, filmst
                 written.append((key, f"{stem}.png"))
             skills_out[key] = res
             rows[key] = _table_row(res)
+            panels.append(_frame_panel(res, ref))
+        if filmstrips:
+            name = f"fidelity_frames_{tr.run_dir.name}.png" if several else "fidelity_frames.png"
+            plot_frame_match(
+                panels, out / name, COVERAGE_TOL, f"{label} ({tr.run_dir.name}): where each skill departs from its clip"
+            )
+            written.append((f"{label}: per clip frame", name))
     result = {
         "skills": skills_out,
         "episodes": episodes,
@@ -279,7 +342,15 @@ def eval_fidelity(runs: list, episodes: int, out: Path, seed: int = 2468, filmst
     }
     write_json(out / "fidelity.json", result)
     cols = list(next(iter(rows.values())))
-    print_table(f"Fidelity per skill ({episodes} episodes each; cells policy / clip)", rows, cols)
+    # the terminal table leaves out the long "not covered" text, printed below it one skill per line
+    print_table(
+        f"Fidelity per skill ({episodes} episodes each; cells policy / clip)",
+        rows,
+        [c for c in cols if c != NOT_COVERED],
+    )
+    print(f"{NOT_COVERED} ({COVERAGE_TOL:g} m at every body):")
+    for key, row in rows.items():
+        print(f"  {key}: {row[NOT_COVERED]}")
     body = markdown_table(rows, cols)
     if written:
         body += "\n\n" + "\n".join(f"![{k}]({f})" for k, f in written)
@@ -294,8 +365,16 @@ METRIC_NOTE = (
     f"clip's frames some policy frame matches within {COVERAGE_TOL:g} m at every body; peaks: highest y of the "
     f"ankle / wrist origin; airborne: share of frames with both foot soles {AIRBORNE_MARGIN:g} m above standing "
     "(the floor for the policy, the clip's own standing sole height for the clip); speed: mean horizontal root "
-    "speed; yaw rate: mean |d heading / dt|; cells policy / clip, policy values averaged over the episodes"
+    "speed; yaw rate: mean |d heading / dt|; cells policy / clip, policy values averaged over the episodes; not "
+    "covered: the longest stretches of clip frames fewer than half of the episodes match, with the body most often "
+    "farthest there and the largest median distance of a frame's best match (fidelity_frames.png plots it)"
 )
+
+
+def _frame_panel(res: dict, ref: ClipReference) -> FramePanel:
+    spans = [(s["t0"], s["t1"], s["body"]) for s in res["frames"]["uncovered"]]
+    title = f"{ref.skill} (clip {ref.clip}): coverage {res['coverage']:.2f}"
+    return FramePanel(title, ref.dt, np.asarray(res["frames"]["distance"]), spans)
 
 
 def _table_row(res: dict) -> dict[str, str | float]:
@@ -315,6 +394,7 @@ def _table_row(res: dict) -> dict[str, str | float]:
         "speed (m/s)": pair("speed"),
         "yaw rate (rad/s)": pair("yaw_rate"),
         "no-fall": res["no_fall"],
+        NOT_COVERED: uncovered_cell(res["frames"]["uncovered"]),
     }
 
 
