@@ -21,7 +21,6 @@ def test_each_rule_is_read_from_its_key():
             "reward.yaw_error_threshold=1.5",
             "reward.goal_reference_window=3",
             "reward.w_track=0.5",
-            "reward.track_form=per_part",
         )
     )
     assert rules == dict(
@@ -32,9 +31,7 @@ def test_each_rule_is_read_from_its_key():
         yaw_error_threshold=1.5,
         goal_reference_window=3,
         reference_reward=True,
-        track_per_part=True,
     )
-    assert env_rules(_reward())["track_per_part"] is False  # the schema's whole (DeepMimic) form
 
 
 def test_tracking_and_no_tracking_reward():

@@ -251,30 +251,19 @@ def test_config_errors(overrides, message):
     assert message in Config.check(cfg)
 
 
-@pytest.mark.parametrize("per_part", [False, True])
-def test_reference_reward_is_the_tracking_reward_where_the_reference_is_checked(skills, per_part):
-    """reward.w_track: r_track against the pose-error reference, 0 for an env whose check is off (grace); with
-    reward.track_form=per_part (`track_per_part`) the per-part form of the same reward."""
+def test_reference_reward_is_the_tracking_reward_where_the_reference_is_checked(skills):
+    """reward.w_track: r_track against the pose-error reference, 0 for an env whose check is off (grace)."""
     from charctl.experiments.cgail.rules import tracking_reward
 
     cfg = OmegaConf.structured(EnvConfig(num_envs=2, ramp_frames=4, switch_prob=0.0))
-    env = CgailEnv(
-        skills,
-        cfg,
-        seed=0,
-        pose_error_threshold=10.0,
-        pose_error_grace_steps=5,
-        reference_reward=True,
-        track_per_part=per_part,
-    )
+    env = CgailEnv(skills, cfg, seed=0, pose_error_threshold=10.0, pose_error_grace_steps=5, reference_reward=True)
     env.forced_command = np.array([1, 1])
     env.start_frame = 3
     env.reset(np.arange(2))
     env.ref_grace[1] = 3  # env 1 unchecked this step
     res = env.step(np.zeros((2, 28)))
-    want = tracking_reward(res.pair_next[:1], skills[1].obs[4:5], per_part)[0]  # RSI frame 3 -> reference frame 4
+    want = tracking_reward(res.pair_next[:1], skills[1].obs[4:5])[0]  # RSI frame 3 -> reference frame 4
     assert res.r_track[0] == pytest.approx(want) and 0.0 < want <= 1.0
-    assert want != pytest.approx(tracking_reward(res.pair_next[:1], skills[1].obs[4:5], not per_part)[0])
     assert res.r_track[1] == 0.0
 
 

@@ -257,36 +257,6 @@ def test_checked_tracking_reward_by_hand(arr):
 
 
 @pytest.mark.parametrize("arr", LIBS)
-def test_tracking_reward_per_part_by_hand(arr):
-    """Env 0 matches: 1 in both forms. Env 1: the right hip's rot6 off by 2 in one entry (4 rad^2, part "right
-    leg") and the right shoulder's by 1 (1 rad^2, "right arm"), the right wrist (end effector 3 of 4) 0.1 m off.
-    Whole: 0.65 exp(-5) + 0.1 + 0.15 exp(-40 * 0.01) + 0.1. Per part: the pose term is the mean over the five
-    parts of exp(-sum), (3 + exp(-4) + exp(-1)) / 5, the end-effector term (3 + exp(-0.4)) / 4."""
-    obs, ref = np.zeros((2, 133)), np.zeros((2, 133))
-    rot0 = rules.OBS_ROT.start
-    obs[1, rot0 + 2 * 6] = 2.0  # joint 2: right hip
-    obs[1, rot0 + 5 * 6 + 3] = 1.0  # joint 5: right shoulder
-    obs[1, rules.OBS_EE.start + 2 * 3] = 0.1  # effector 2: right wrist, x
-    whole = rules.tracking_reward(arr(obs), arr(ref))
-    np.testing.assert_allclose(_np(whole), [1.0, 0.65 * math.exp(-5) + 0.2 + 0.15 * math.exp(-0.4)], atol=1e-12)
-    part = rules.tracking_reward(arr(obs), arr(ref), per_part=True)
-    want = 0.65 * (3 + math.exp(-4) + math.exp(-1)) / 5 + 0.2 + 0.15 * (3 + math.exp(-0.4)) / 4
-    np.testing.assert_allclose(_np(part), [1.0, want], atol=1e-12)
-    checked = rules.checked_tracking_reward(arr(obs), arr(ref), arr([True, True]), per_part=True)
-    np.testing.assert_allclose(_np(checked), [1.0, want], atol=1e-12)
-    # the parts are the five runs of the 12 clip joints: torso 2, right leg 3, right arm 2, left leg 3, left arm 2
-    assert np.asarray(rules._part_matrix(rules.TRACK_PART_ENDS)).sum(axis=0).tolist() == [2, 3, 2, 3, 2]
-    from charctl.motion.skeleton import load_skeleton
-
-    skel = load_skeleton()
-    names = [skel.names[b] for b in skel.clip_joint_bodies]  # OBS_ROT's joint order
-    starts = (0, *rules.TRACK_PART_ENDS[:-1])
-    groups = [{n.split("_")[0] for n in names[a:b]} for a, b in zip(starts, rules.TRACK_PART_ENDS)]
-    assert names[:2] == ["chest", "neck"] and groups[1:] == [{"right"}, {"right"}, {"left"}, {"left"}]
-    assert [n.split("_")[1] for n in names[2:7]] == ["hip", "knee", "ankle", "shoulder", "elbow"]
-
-
-@pytest.mark.parametrize("arr", LIBS)
 def test_reference_check_by_hand(arr):
     """Five envs, pose threshold 0.5 m, heading radius 1.5 rad (1/3 m per rad), dt 0.1 s, the timed reference
     spinning at 5 rad/s. Env 0 stands still, 1.2 rad already missed: -1.7 rad -> 0.567 m > 0.5, ended; it

@@ -154,11 +154,6 @@ class RewardConfig:
     # steps (docs/cgail.md, "Spindance"). Names must be skills; values >= 0; any > 0 needs pose_error_threshold > 0.
     # Empty = w_track for every skill.
     w_track_skills: dict[str, float] = field(default_factory=dict)
-    # Form of the tracking reward (the tracking baseline's and w_track's): whole = DeepMimic's, one exponential of the
-    # summed joint-rotation error and one of the summed end-effector error; per_part = the mean of one exponential
-    # per body part (torso, each leg, each arm) and per end effector, so a pose off in one part still pays for the
-    # others (rules.tracking_reward). docs/cgail.md, "Per-part tracking reward".
-    track_form: Annotated[str, Literal["whole", "per_part"]] = "whole"
 
 
 @dataclass

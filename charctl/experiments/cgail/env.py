@@ -77,7 +77,6 @@ class CgailEnv:
         yaw_error_threshold: float = 0.0,
         goal_reference_window: int = 0,
         reference_reward: bool = False,
-        track_per_part: bool = False,
         device=None,
         sim=None,
     ):
@@ -92,7 +91,6 @@ class CgailEnv:
         self.yaw_scale = yaw_scale(self.pose_threshold, float(yaw_error_threshold))  # 0: no heading check
         self.goal_window = int(goal_reference_window)  # 0: heading-goal skills scored against the closest frame
         self.reference_reward = bool(reference_reward)  # r_track against that reference (reward.w_track)
-        self.track_per_part = bool(track_per_part)  # reward.track_form=per_part: rules.tracking_reward's per-part form
         # env.phase_obs: the timed reference's phase in the state of the adversarial policy (training and evaluation)
         self.phase_obs = bool(getattr(env_cfg, "phase_obs", False)) and not tracking
         self.timed_reference = self.pose_threshold > 0 or self.phase_obs  # reference advanced, restarting at frame 0
@@ -339,7 +337,7 @@ class CgailEnv:
         elif self.timed_reference:
             ref, _ = self._advance_phase(restart=True)
         final_state, pair_next = self._features(k)
-        r_track = tracking_reward(pair_next, ref, self.track_per_part) if self.tracking else zeros
+        r_track = tracking_reward(pair_next, ref) if self.tracking else zeros
         cmd = self.cmd
         r_goal = goal_reward(self.goal_angle, k.com_vel, self.speed[cmd], self.has_goal[cmd], self.cfg.goal_sharpness)
         fell = self.sim.non_foot_ground_contact(self.cfg.fall_tolerance)

@@ -27,7 +27,6 @@ def env_rules(reward, **overrides: Any) -> dict[str, Any]:
         yaw_error_threshold=float(reward.yaw_error_threshold),
         goal_reference_window=int(reward.goal_reference_window),
         reference_reward=float(reward.w_track) > 0 or any(float(v) > 0 for v in reward.w_track_skills.values()),
-        track_per_part=str(reward.track_form) == "per_part",
     )
     unknown = set(overrides) - set(rules)
     if unknown:
@@ -46,14 +45,6 @@ def env_reference_check(
     per_env = (env.yaw_err, env.ref_active, env.ref_grace, env.has_goal[env.cmd], fell, unstable)
     rule = dict(threshold=env.pose_threshold, yaw_error_scale=env.yaw_scale, dt=1.0 / env.cfg.control_hz)
     r_track, pose_ended, _, env.yaw_err = reference_check(
-        err,
-        scored,
-        pair_next,
-        ref,
-        r_track,
-        *per_env,
-        **rule,
-        reference_reward=env.reference_reward,
-        per_part=env.track_per_part,
+        err, scored, pair_next, ref, r_track, *per_env, **rule, reference_reward=env.reference_reward
     )
     return r_track, pose_ended, scored

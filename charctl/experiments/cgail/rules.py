@@ -45,57 +45,27 @@ OBS_ROOT_H, OBS_ROOT_V, OBS_ROT, OBS_VEL, OBS_EE = (
 )
 
 
-# reward.track_form=per_part: the body parts of the pose term, as runs of the 12 clip joints in OBS_ROT's order
-# (chest, neck, right hip, knee, ankle, right shoulder, elbow, left hip, knee, ankle, left shoulder, elbow):
-# torso, right leg, right arm, left leg, left arm; `TRACK_PART_ENDS` the index after each run.
-TRACK_PART_ENDS = (2, 5, 7, 10, 12)
-
-
-def _part_matrix(ends: tuple[int, ...]) -> list[list[float]]:
-    """(items, parts) 0/1 matrix: item i belongs to run p, runs [0, e1), [e1, e2), ... (`ends`)."""
-    starts = (0, *ends[:-1])
-    return [[1.0 if a <= i < b else 0.0 for a, b in zip(starts, ends)] for i in range(ends[-1])]
-
-
-def _mean_exp_of_parts(sq_items: Array, ends: tuple[int, ...], scale: float) -> Array:
-    """(N,) mean over the runs of items [0, e1), [e1, e2), ... (`ends`) of exp(-scale * the run's sum of
-    `sq_items` (N, items)): one exponential per body part, so one part far off does not zero the others'."""
-    xp = namespace(sq_items)
-    parts = xp.asarray(_part_matrix(ends), dtype=sq_items.dtype, device=device_of(sq_items))
-    return xp.mean(xp.exp(-scale * (sq_items @ parts)), axis=1)
-
-
-def tracking_reward(obs: Array, ref: Array, per_part: bool = False) -> Array:
+def tracking_reward(obs: Array, ref: Array) -> Array:
     """(N,) r in [0, 1] between simulated and reference disc observations (N, 133).
 
     r = 0.65 exp(-1 sum_j |rot6_j - rot6*_j|^2) + 0.1 exp(-0.1 sum_b |v_b - v*_b|^2)
       + 0.15 exp(-40 sum_e |p_e - p*_e|^2) + 0.1 exp(-10 (h - h*)^2 - |v_root - v*_root|^2)
     (joint rotations as the first two rotation-matrix columns; velocities in m/s; positions in m,
-    relative to the root in the heading frame): DeepMimic's form, reward.track_form=whole.
-
-    `per_part` (reward.track_form=per_part): the pose term is the mean over the five body parts
-    (`TRACK_PART_ENDS`) of exp(-1 sum_{j in part} |rot6_j - rot6*_j|^2) and the end-effector term the mean over
-    the four end effectors of exp(-40 |p_e - p*_e|^2); the same weights, the same r = 1 at a perfect match. In
-    the whole form a pose 2-4 rad^2 off in sum (the ten-skill kick's middle) scores exp(-3) ~ 0.05 whatever one
-    arm does; per part, that arm's own term still moves (docs/cgail.md, "Per-part tracking reward").
+    relative to the root in the heading frame).
     """
     xp = namespace(obs, ref)
-    diff2 = (obs - ref) ** 2
 
     def sq(sl: slice) -> Array:
-        return xp.sum(diff2[:, sl], axis=1)
+        return xp.sum((obs[:, sl] - ref[:, sl]) ** 2, axis=1)
 
     w, k = TRACK_WEIGHTS, TRACK_SCALES
     root = xp.exp(-k["root_height"] * sq(OBS_ROOT_H) - k["root_vel"] * sq(OBS_ROOT_V))
-    if per_part:
-        n = diff2.shape[0]
-        joints = xp.sum(xp.reshape(diff2[:, OBS_ROT], (n, 12, 6)), axis=2)  # (N, 12)
-        effectors = xp.sum(xp.reshape(diff2[:, OBS_EE], (n, 4, 3)), axis=2)  # (N, 4)
-        pose = _mean_exp_of_parts(joints, TRACK_PART_ENDS, k["pose"])
-        ee = xp.mean(xp.exp(-k["ee"] * effectors), axis=1)
-    else:
-        pose, ee = xp.exp(-k["pose"] * sq(OBS_ROT)), xp.exp(-k["ee"] * sq(OBS_EE))
-    return w["pose"] * pose + w["vel"] * xp.exp(-k["vel"] * sq(OBS_VEL)) + w["ee"] * ee + w["root"] * root
+    return (
+        w["pose"] * xp.exp(-k["pose"] * sq(OBS_ROT))
+        + w["vel"] * xp.exp(-k["vel"] * sq(OBS_VEL))
+        + w["ee"] * xp.exp(-k["ee"] * sq(OBS_EE))
+        + w["root"] * root
+    )
 
 
 def pose_keys(obs: Array) -> Array:
@@ -355,12 +325,11 @@ def pose_check(
     return checked, checked & (err > threshold)
 
 
-def checked_tracking_reward(obs: Array, scored: Array, checked: Array, per_part: bool = False) -> Array:
-    """(N,) reward.w_track's reward: `tracking_reward` (its `per_part` form or not) of the disc observations `obs`
-    (N, 133) against the references the pose error scored them against (`scored` (N, 133)) where `checked`
-    (`pose_check`), else 0."""
+def checked_tracking_reward(obs: Array, scored: Array, checked: Array) -> Array:
+    """(N,) reward.w_track's reward: `tracking_reward` of the disc observations `obs` (N, 133) against the
+    references the pose error scored them against (`scored` (N, 133)) where `checked` (`pose_check`), else 0."""
     xp = namespace(obs, scored)
-    r = tracking_reward(obs, scored, per_part)
+    r = tracking_reward(obs, scored)
     return xp.where(checked, r, xp.zeros_like(r))
 
 
@@ -381,7 +350,6 @@ def reference_check(
     yaw_error_scale: float,
     dt: float,
     reference_reward: bool,
-    per_part: bool = False,
 ) -> tuple[Array, Array, Array, Array]:
     """One control step's check against the timed reference (reward.pose_error_threshold `threshold` m > 0):
     (r_track, pose_ended, checked, yaw_err), all (N,), what both envs' `step` apply.
@@ -392,12 +360,11 @@ def reference_check(
     the heading gained on `ref` over `dt` s joins the error (`add_yaw_error`; `yaw_err` (N,) rad comes back
     updated, else unchanged). `pose_check` then gives `checked` (reference running, out of grace, no fall
     `fell` or blow-up `unstable`) and `pose_ended` (checked and err > threshold). With `reference_reward`
-    (reward.w_track) r_track is `checked_tracking_reward` against `scored` (in [0, 1], 0 where unchecked; its
-    `per_part` form with reward.track_form=per_part);
+    (reward.w_track) r_track is `checked_tracking_reward` against `scored` (in [0, 1], 0 where unchecked);
     without it the `r_track` passed in (the tracking baseline's, or zeros) comes back."""
     if yaw_error_scale > 0:  # reward.yaw_error_threshold: the heading gained on the reference
         err, yaw_err = add_yaw_error(err, yaw_err, obs, ref, ref_active, ref_grace, has_goal, dt, yaw_error_scale)
     checked, pose_ended = pose_check(ref_active, ref_grace, fell, unstable, err, threshold)
     if reference_reward:  # reward.w_track: the tracking reward where the reference is checked
-        r_track = checked_tracking_reward(obs, scored, checked, per_part)
+        r_track = checked_tracking_reward(obs, scored, checked)
     return r_track, pose_ended, checked, yaw_err
