@@ -44,13 +44,6 @@ def perturbed_start(
     return q, qvel * vel_scale
 
 
-def _env(run, k: int, envs: int, seconds: float):
-    env = run.make_env(envs, seed=7, switch_prob=0.0, episode_seconds=seconds)
-    env.forced_command = np.full(envs, k)
-    env.start_frame, env.random_yaw = 0, False
-    return env
-
-
 def passes(run, k: int, envs: int, n_passes: int) -> list[dict]:
     """Per pass of skill `k`'s clip from frame 0: foot peaks (envs,), and at its start the pose distance (envs,) m
     from the clip's frame 0 and the root height (envs,) m. Envs that fell stop counting (`alive`)."""
@@ -59,8 +52,7 @@ def passes(run, k: int, envs: int, n_passes: int) -> list[dict]:
 
     clip_len = len(run.agent.skills[k].obs)
     hz = float(run.cfg.env.control_hz)
-    env = _env(run, k, envs, n_passes * clip_len / hz + 1.0)
-    env.reset(np.arange(envs))
+    env = run.held_env(np.full(envs, k), n_passes * clip_len / hz + 1.0, seed=7)
     ref0 = np.broadcast_to(env.ref_obs[k, 0], env.obs.shape)
     out, pos, rot = [], [], []
     start = {"distance": reference_pose_error(env.obs, ref0), "root_height": env.obs[:, 0].copy()}
@@ -84,7 +76,7 @@ def start_sensitivity(run, k: int, envs: int, seed: int = 0) -> list[tuple[str, 
     hz = float(run.cfg.env.control_hz)
     rows = []
     for label, noise, vel_scale in START_VARIANTS:
-        env = _env(run, k, envs, clip_len / hz + 1.0)
+        env = run.held_env(np.full(envs, k), clip_len / hz + 1.0, seed=7)
         rng = np.random.default_rng(seed)
         q0, v0 = env.rsi_qpos[k, 0].copy(), env.rsi_qvel[k, 0].copy()
         for e in range(envs):  # one reset per env, each from its own perturbed frame-0 state

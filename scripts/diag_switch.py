@@ -33,11 +33,7 @@ def measure(run, ka: int, kb: int, envs: int, switch_step: int, steps: int) -> d
 
     torch.manual_seed(0)
     rules = env_rules(run.cfg.reward, tracking=False, reference_reward=True)
-    env = run.make_env(envs, seed=7, rules=rules, switch_prob=0.0, episode_seconds=steps / run.cfg.env.control_hz + 1)
-    env.forced_command = np.full(envs, ka)
-    env.start_frame = 0
-    env.random_yaw = False
-    env.reset(np.arange(envs))
+    env = run.held_env(np.full(envs, ka), steps / run.cfg.env.control_hz + 1, seed=7, rules=rules)
     switch = switch_at(env, kb, switch_step, int(run.cfg.env.ramp_frames))  # the switch study's own switch
 
     alive = np.ones(envs, dtype=bool)

@@ -48,10 +48,7 @@ def one_pass(run, k: int) -> dict[str, np.ndarray]:
     from charctl.experiments.cgail.rules import tracking_reward
 
     clip = run.agent.skills[k].obs  # (L, 133) the clip's disc observations at the control rate
-    env = run.make_env(1, seed=7, switch_prob=0.0, episode_seconds=len(clip) / float(run.cfg.env.control_hz) + 1.0)
-    env.forced_command = np.full(1, k)
-    env.start_frame, env.random_yaw = 0, False
-    env.reset(np.arange(1))
+    env = run.held_env([k], len(clip) / float(run.cfg.env.control_hz) + 1.0, seed=7)
     rows: dict[str, list] = {"parts": [], "ee": [], "r_track": [], "alive": []}
     alive = True
     for step in policy_steps(run.agent, env, len(clip) - 1):

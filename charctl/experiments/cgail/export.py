@@ -99,11 +99,7 @@ def parse_schedule(text: str, names: list[str]) -> list[tuple[float, int]]:
 @torch.no_grad()
 def schedule_rollout(tr: TrainedRun, schedule: list[tuple[float, int]], seconds: float) -> tuple[np.ndarray, dict]:
     """One character following the command schedule; returns qpos (T, nq) and stats."""
-    env = tr.make_env(1, seed=0, switch_prob=0.0, episode_seconds=seconds + 10)
-    env.forced_command = np.array([schedule[0][1]])
-    env.start_frame = 0
-    env.random_yaw = False
-    env.reset(np.array([0]))
+    env = tr.held_env([schedule[0][1]], seconds + 10)
     hz = env.cfg.control_hz
     qpos = [env.sim.qpos[0].copy()]
     falls = 0

@@ -86,11 +86,7 @@ def stay_up_rollout(tr: TrainedRun, seconds: float = STAY_UP_SECONDS) -> dict[st
     from charctl.experiments.cgail.drive import policy_steps
 
     K = len(tr.agent.skills)
-    env = tr.make_env(K, seed=0, switch_prob=0.0, episode_seconds=60.0)
-    env.forced_command = np.arange(K)
-    env.random_yaw = False
-    env.start_frame = 0
-    env.reset(np.arange(K))
+    env = tr.held_env(np.arange(K), 60.0)
     terminated = np.zeros(K, dtype=bool)
     unstable = np.zeros(K, dtype=bool)
     low = env.sim.qpos[:, 1].copy()  # y is up; qpos[:, :3] is the root position

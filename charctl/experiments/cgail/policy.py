@@ -48,6 +48,22 @@ class TrainedRun:
         rules = {"tracking": self.cfg.reward.kind == "tracking"} if rules is None else rules
         return CgailEnv(self.agent.skills, env_cfg, seed=seed, conditional=self.agent.conditional, **rules)
 
+    def held_env(
+        self, commands, episode_seconds: float, seed: int = 0, rules: dict | None = None, **env_overrides
+    ) -> CgailEnv:
+        """A `make_env` of one env per entry of `commands` (skill indices), each commanded with its skill and held
+        (no random switches; the caller may still switch), reset at its clip's frame 0 with the clip's heading (no
+        random yaw): how the evaluations, the export and the diagnostics start a skill. `episode_seconds` the
+        episode limit (s); `rules` and `env_overrides` as `make_env`."""
+        commands = np.asarray(commands, dtype=np.int64).reshape(-1)
+        overrides = {"switch_prob": 0.0, "episode_seconds": episode_seconds, **env_overrides}
+        env = self.make_env(len(commands), seed=seed, rules=rules, **overrides)
+        env.forced_command = commands
+        env.start_frame = 0
+        env.random_yaw = False
+        env.reset(np.arange(len(commands)))
+        return env
+
     def mean_action(self, env: CgailEnv) -> np.ndarray:
         """(N, 28) mean actions of the policy on the env's current state (`drive.mean_action`), float64."""
         return mean_action(self.agent, env)

@@ -38,11 +38,7 @@ def make_push_simulator(run_dir: str | Path, skill: str = "walk") -> Callable[[o
     k = tr.skill_index(skill)
 
     def simulate(case, seed: int) -> bool:
-        env = tr.make_env(1, seed=int(seed), switch_prob=0.0, episode_seconds=1e6)
-        env.forced_command = np.array([k])
-        env.start_frame = 0
-        env.random_yaw = False
-        env.reset(np.array([0]))
+        env = tr.held_env([k], 1e6, seed=int(seed))
         _, end = push_window(case)
         steps = int(np.ceil((end + case.observe_s) * env.cfg.control_hz))
         for step in policy_steps(tr.agent, env, steps, force=push_schedule(env, case)):

@@ -93,11 +93,7 @@ def load_eval_run(run_dir: str | Path, device: str | None = None, checkpoint: st
 @torch.no_grad()
 def rollout_skill(tr: DeviceRun, skill: int, episodes: int, seconds: float, seed: int = 0) -> SkillRollout:
     """`episodes` envs commanded with `skill` (mean actions, RSI at frame 0, no switching)."""
-    env = tr.make_env(episodes, seed=seed, switch_prob=0.0, episode_seconds=seconds + 1.0)
-    env.forced_command = np.full(episodes, skill)
-    env.start_frame = 0
-    env.random_yaw = False
-    env.reset(np.arange(episodes))
+    env = tr.held_env(np.full(episodes, skill), seconds + 1.0, seed=seed)
     steps = int(round(seconds * env.cfg.control_hz))
     alive = np.ones(episodes, dtype=bool)
     rots = [[local_joint_rotations(env)[i]] for i in range(episodes)]
@@ -179,11 +175,7 @@ def switch_rollout(
     0: at once), recorded until frame `t_end`; bodies kept for the `perform_frames` after the switch."""
     hz = tr.cfg.env.control_hz
     episode_seconds = t_end / hz + 1.0
-    env = tr.make_env(trials, seed=7, switch_prob=0.0, ramp_frames=ramp, episode_seconds=episode_seconds)
-    env.forced_command = np.full(trials, ka)
-    env.start_frame = 0
-    env.random_yaw = False
-    env.reset(np.arange(trials))
+    env = tr.held_env(np.full(trials, ka), episode_seconds, seed=7, ramp_frames=ramp)
     probs, rs, rc, alive_hist, pos_after, rot_after = [], [], [], [], [], []
     alive = np.ones(trials, dtype=bool)
     for step in policy_steps(tr.agent, env, t_end, before_step=switch_at(env, kb, t_switch, ramp)):
