@@ -156,12 +156,12 @@ repro-cgail-10skill-radii: install ## cgail: ten skills with the root-height (0.
 
 # The tracking baseline over all ten skills (Table 6.1's third column for every skill). ~4.6 h on 2 cores at the cGAIL
 # run's budget (9.0k samples/s measured); started 2026-12-04 and paused at 8.6e6 samples (outputs/ only, lost);
-# re-started 2026-12-05 10:07, stopped at 5.89e7 (10.4k samples/s alone), continued to 8.12e7, resumable in
-# pretrained/in-progress/cgail-tracking-10skill (charctl train cgail --resume <a copy of it>). The
-# three-skill one is pretrained/tracking-3skill. docs/cgail.md "Spindance": a tracking run ended at the pose check
+# re-started 2026-12-05 10:07, stopped at 5.89e7 (10.4k samples/s alone), continued to 8.12e7 and, 15:13-17:33 with
+# one pause, to 1.5e8 (~10k samples/s alone): pretrained/tracking-10skill. The three-skill one is
+# pretrained/tracking-3skill. docs/cgail.md "Spindance": a tracking run ended at the pose check
 # (reward.pose_error_threshold=0.5) learns what this one, without it, may not.
 .PHONY: repro-cgail-tracking-10skill
-repro-cgail-tracking-10skill: install ## cgail: the multi-skill tracking baseline on all ten skills (1.5e8 samples, ~4 h on 2 cores, resumable; at 8.12e7 in pretrained/in-progress/), evaluated
+repro-cgail-tracking-10skill: install ## cgail: the multi-skill tracking baseline on all ten skills (1.5e8 samples, ~4 h on 2 cores, resumable; = pretrained/tracking-10skill), evaluated
 	$(CHARCTL) train cgail "use_skills=[]" reward.kind=tracking env.switch_prob=0 train.fidelity_every=2000000 train.total_samples=150000000 train.checkpoint_every=20 train.keep_checkpoint_every=2500000 seed=1 output_root=$(CGAIL_FID)/tracking10
 	T=$$(ls -d $(CGAIL_FID)/tracking10/cgail/*/ | tail -1); \
 	$(CHARCTL) eval $$T --fidelity -k 4 && $(CHARCTL) eval $$T --survival 5 -k 32 && $(CHARCTL) eval $$T --dtw -k 8
