@@ -127,8 +127,8 @@ def test_frame_report_of_a_frozen_guard_against_the_kick(refs):
     from charctl.experiments.cgail.fidelity import frame_report, uncovered_cell
 
     kick = refs["right_kick"]
-    frozen = np.repeat(kick.rel[:1], 20, axis=0)[None]
-    rep = frame_report(frozen, np.array([20]), kick)
+    frozen = np.repeat(kick.rel[:1], 20, axis=0)
+    rep = frame_report(*(x[None] for x in frame_match(frozen, kick.rel)), kick.dt)
     direct = body_distances(kick.rel[:1], kick.rel)[0].max(axis=-1)  # (m,)
     assert np.allclose(rep["distance"][0], direct, atol=1e-4)
     covered = direct <= 0.15
@@ -142,7 +142,7 @@ def test_frame_report_of_a_frozen_guard_against_the_kick(refs):
     assert first["body"] == load_skeleton().names[np.bincount(span_bodies).argmax()]
     assert first["peak_m"] == pytest.approx(direct[first["first"] : first["last"] + 1].max(), abs=1e-4)
     assert uncovered_cell(rep["uncovered"]).startswith(f"{first['t0']:.2f}-{first['t1']:.2f} s {first['body']}")
-    assert frame_report(kick.rel[None], np.array([len(kick.rel)]), kick)["uncovered"] == []
+    assert frame_report(*(x[None] for x in frame_match(kick.rel, kick.rel)), kick.dt)["uncovered"] == []
 
 
 def test_uncovered_cell_keeps_the_longest_spans_in_clip_order():

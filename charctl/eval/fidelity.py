@@ -97,6 +97,17 @@ def uncovered_spans(covered: np.ndarray) -> list[tuple[int, int]]:
     return list(zip(np.flatnonzero(edges == -1).tolist(), (np.flatnonzero(edges == 1) - 1).tolist()))
 
 
+def error_and_frame_match(
+    seq: np.ndarray, clip: np.ndarray, loop: bool = False
+) -> tuple[float, np.ndarray, np.ndarray]:
+    """(mean body-position error along the DTW alignment (m), then `frame_match`'s distance (m,) and body (m,)) of
+    one sequence, from one computation of the body distances. `seq`, `clip` and `loop` as `body_error_and_coverage`."""
+    d = body_distances(seq, clip)  # (n, m, B)
+    cost = d.mean(axis=-1)[:, tile_index(len(seq), len(clip), loop)]
+    i, j, _ = dtw_align(cost)
+    return (float(cost[i, j].mean()), *_best_match(d))
+
+
 def body_error_and_coverage(
     seq: np.ndarray, clip: np.ndarray, loop: bool = False, tol: float = COVERAGE_TOL
 ) -> tuple[float, float]:
@@ -105,11 +116,8 @@ def body_error_and_coverage(
     `seq` (n, B, 3) and `clip` (m, B, 3) are heading-frame positions (`heading_positions`). The DTW
     reference is the clip, tiled to n frames when it loops (`tile_index`); coverage counts the clip's
     own m frames."""
-    d = body_distances(seq, clip)  # (n, m, B)
-    coverage = float(np.mean(_best_match(d)[0] <= tol))
-    cost = d.mean(axis=-1)[:, tile_index(len(seq), len(clip), loop)]
-    i, j, _ = dtw_align(cost)
-    return float(cost[i, j].mean()), coverage
+    error, dist, _ = error_and_frame_match(seq, clip, loop)
+    return error, float(np.mean(dist <= tol))
 
 
 def foot_sole_heights(body_pos: np.ndarray, body_rot: np.ndarray) -> np.ndarray:

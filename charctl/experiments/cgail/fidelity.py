@@ -35,8 +35,7 @@ from charctl.eval.fidelity import (
     COVERAGE_TOL,
     PEAK_KEYS,
     body_distances,
-    body_error_and_coverage,
-    frame_match,
+    error_and_frame_match,
     heading_positions,
     signature,
     standing_sole_height,
@@ -179,16 +178,16 @@ def record_rollouts(
     return out
 
 
-def frame_report(rel: np.ndarray, lengths: np.ndarray, ref: ClipReference) -> dict:
-    """Which frames of the clip the E episodes do. `rel` (E, T, 15, 3) heading-frame positions, `lengths` (E,)
-    valid frames. Per clip frame: `distance` (E, m) of its best match in each episode (m, at the farthest
-    body), `body` (E, m) that body's index, `covered_share` (m,) of the episodes within `COVERAGE_TOL`; and
-    `uncovered`: each stretch of clip frames fewer than half of the episodes cover, as first / last frame,
-    t0 / t1 (s), the body most often farthest there, and the largest median distance there (`peak_m`)."""
+def frame_report(dist: np.ndarray, body: np.ndarray, dt: float) -> dict:
+    """Which frames of the clip the E episodes do, from `frame_match` of each episode against the clip: `dist`
+    (E, m) the distance of each clip frame's best match (m, at the farthest body) and `body` (E, m) that body's
+    index; `dt` s between clip frames. Returns those (as `distance`, `body`), `covered_share` (m,) of the episodes
+    within `COVERAGE_TOL`, and `uncovered`: each stretch of clip frames fewer than half of the episodes cover, as
+    first / last frame, t0 / t1 (s), the body most often farthest there, and the largest median distance there
+    (`peak_m`)."""
     from charctl.motion.skeleton import load_skeleton
 
     names = load_skeleton().names
-    dist, body = (np.stack(x) for x in zip(*(frame_match(rel[e, :n], ref.rel) for e, n in enumerate(lengths))))
     share = (dist <= COVERAGE_TOL).mean(axis=0)
     median = np.median(dist, axis=0)
     spans = []
@@ -198,8 +197,8 @@ def frame_report(rel: np.ndarray, lengths: np.ndarray, ref: ClipReference) -> di
             {
                 "first": a,
                 "last": b,
-                "t0": a * ref.dt,
-                "t1": b * ref.dt,
+                "t0": a * dt,
+                "t1": b * dt,
                 "body": names[int(np.bincount(off).argmax())],
                 "peak_m": float(median[a : b + 1].max()),
             }
@@ -229,8 +228,9 @@ def uncovered_cell(spans: list[dict], most: int = 3) -> str:
 def score_recording(rec: Recording, ref: ClipReference) -> dict:
     """The fidelity numbers of one skill's episodes against its clip (episode values averaged)."""
     rel = heading_positions(rec.body_pos, rec.body_rot[..., 0, :])
-    per_episode = [body_error_and_coverage(rel[e, :n], ref.rel, ref.loop) for e, n in enumerate(rec.lengths)]
-    errors, coverages = (np.array(x) for x in zip(*per_episode))
+    per_episode = [error_and_frame_match(rel[e, :n], ref.rel, ref.loop) for e, n in enumerate(rec.lengths)]
+    errors, dist, body = (np.array(x) for x in zip(*per_episode))  # (E,), (E, m), (E, m)
+    coverages = (dist <= COVERAGE_TOL).mean(axis=1)  # as body_error_and_coverage
     sig = signature(rec.body_pos, rec.body_rot, rec.dt, 0.0, rec.lengths)
     return {
         "clip": ref.clip,
@@ -242,7 +242,7 @@ def score_recording(rec: Recording, ref: ClipReference) -> dict:
         "episodes": len(rec.lengths),
         "seconds_recorded": float((rec.lengths.mean() - 1) * rec.dt),
         "episode_seconds": ref.episode_seconds,
-        "frames": frame_report(rel, rec.lengths, ref),
+        "frames": frame_report(dist, body, ref.dt),
         "per_episode": {
             "coverage": coverages.tolist(),
             "body_error": errors.tolist(),
