@@ -42,3 +42,17 @@ def test_a_hop_is_airborne_and_ballistic_and_standing_is_neither():
     assert (n - 4) / T <= both <= up and both <= low <= ballistic
     standing = mod.flight_shares(pos[:20], rot[:20], dt, 0.0, loop=False)
     assert standing == (0.0, 0.0, 0.0, 0.0)
+
+
+def test_step_timing_of_a_hop_counts_one_landing_per_foot_and_the_flight_length():
+    mod = _load_script()
+    dt = 1 / 30
+    pos, rot, n = _hop(20, 20, 1.5, dt)
+    T = len(pos)
+    lift = pos[:, 0, 1] - pos[0, 0, 1]
+    up = int((lift >= 0.02).sum())  # soles more than 2 cm up: both feet, the whole body is lifted
+    rate, flight = mod.step_timing(pos, rot, dt, 0.0)
+    assert rate == 2 / (T * dt)  # both feet come down once, at the landing
+    assert flight == up * dt
+    assert 0 < up < n  # the flight counted at 2 cm is shorter than the whole ballistic arc
+    assert mod.step_timing(pos[:20], rot[:20], dt, 0.0) == (0.0, 0.0)  # standing: no touchdown, no flight
