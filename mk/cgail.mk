@@ -128,6 +128,19 @@ repro-cgail-3skill-track4: install ## cgail: run H's command with reward.w_track
 	T=$$(ls -d $(CGAIL_FID)/track4-3skill/cgail/*/ | tail -1); \
 	$(CHARCTL) eval $$T --fidelity -k 4 && $(CHARCTL) eval $$T --survival 5 -k 32 && $(CHARCTL) eval $$T --dtw --confusion --switch walk right_kick -k 8
 
+# Run H's command (the small preset) at a second seed, and the same with the moving walk reference of the ten-skill
+# runs (docs/cgail.md, "Run H at a second seed").
+.PHONY: repro-cgail-3skill-seed2 repro-cgail-3skill-window-seed2
+repro-cgail-3skill-seed2: install ## cgail: run H's command at seed 2 (3 skills, 4e7 samples; ~70 min on 2 cores), evaluated
+	$(CHARCTL) train cgail train.total_samples=$(CGAIL_FID_SAMPLES) train.checkpoint_every=20 train.keep_checkpoint_every=2500000 seed=2 output_root=$(CGAIL_FID)/H-seed2
+	S=$$(ls -d $(CGAIL_FID)/H-seed2/cgail/*/ | tail -1); \
+	$(CHARCTL) eval $$S --fidelity -k 4 && $(CHARCTL) eval $$S --survival 5 -k 32 && $(CHARCTL) eval $$S --dtw --confusion --switch walk right_kick -k 8
+
+repro-cgail-3skill-window-seed2: install ## cgail: run H's command at seed 2 with the moving walk reference, reward.goal_reference_window=3 (4e7 samples; ~70 min on 2 cores), evaluated
+	$(CHARCTL) train cgail reward.goal_reference_window=3 train.total_samples=$(CGAIL_FID_SAMPLES) train.checkpoint_every=20 train.keep_checkpoint_every=2500000 seed=2 output_root=$(CGAIL_FID)/H-window-seed2
+	W=$$(ls -d $(CGAIL_FID)/H-window-seed2/cgail/*/ | tail -1); \
+	$(CHARCTL) eval $$W --fidelity -k 4 && $(CHARCTL) eval $$W --survival 5 -k 32 && $(CHARCTL) eval $$W --dtw --confusion --switch walk right_kick -k 8
+
 .PHONY: repro-cgail-10skill-track4
 repro-cgail-10skill-track4: install ## cgail: the window run's ten-skill command with reward.w_track=4.0 (1.5e8 samples; ~5 h on 2 cores, resumable), evaluated
 	$(CHARCTL) train cgail "use_skills=[]" reward.w_track=4.0 reward.root_height_threshold=0.15 reward.yaw_error_threshold=1.5 reward.goal_reference_window=3 train.fidelity_every=2000000 train.total_samples=150000000 train.checkpoint_every=20 train.keep_checkpoint_every=2500000 seed=1 output_root=$(CGAIL_FID)/track4-10skill
