@@ -28,21 +28,28 @@ import numpy as np
 
 G = 9.81
 BALLISTIC = 0.7  # fraction of g
+LOW_MARGIN = 0.02  # m: a sole this far above standing is off the ground for the 2-cm columns and the step timing
+
+
+def tile_loop(pos: np.ndarray, rot: np.ndarray, loop: bool) -> tuple[np.ndarray, np.ndarray]:
+    """A looping clip three times over (so finite differences and flights see the wrap), else as given."""
+    reps = 3 if loop else 1
+    return np.concatenate([pos] * reps), np.concatenate([rot] * reps)
 
 
 def flight_shares(pos: np.ndarray, rot: np.ndarray, dt: float, ground: float, loop: bool) -> tuple[float, ...]:
     """(feet > 5 cm, ballistic, both, feet > 2 cm and ballistic) shares of the frames of one sequence
     (`pos` (T, 15, 3), `rot` (T, 15, 4) world; `ground` the standing sole height)."""
+    from charctl.eval.fidelity import AIRBORNE_MARGIN as UP
     from charctl.eval.fidelity import foot_sole_heights
 
-    if loop:  # three loops so the finite differences see the wrap; score the middle one
-        pos, rot = np.concatenate([pos] * 3), np.concatenate([rot] * 3)
+    pos, rot = tile_loop(pos, rot, loop)  # a loop is scored on the middle of its three copies
     sole = foot_sole_heights(pos, rot).min(axis=1) - ground
     accel = np.gradient(np.gradient(pos[:, 0, 1], dt), dt)
     ballistic = accel < -BALLISTIC * G
     n = len(sole) // 3 if loop else 0
     keep = slice(n, 2 * n) if loop else slice(None)
-    parts = (sole > 0.05, ballistic, (sole > 0.05) & ballistic, (sole > 0.02) & ballistic)
+    parts = (sole > UP, ballistic, (sole > UP) & ballistic, (sole > LOW_MARGIN) & ballistic)
     return tuple(float(p[keep].mean()) for p in parts)
 
 
@@ -53,7 +60,7 @@ def step_timing(pos: np.ndarray, rot: np.ndarray, dt: float, ground: float) -> t
     from charctl.eval.fidelity import foot_sole_heights
 
     sole = foot_sole_heights(pos, rot) - ground  # (T, 2)
-    down = sole < 0.02
+    down = sole < LOW_MARGIN
     touchdowns = int(np.sum(down[1:] & ~down[:-1]))
     air = np.concatenate([[False], (~down).all(axis=1), [False]]).astype(np.int8)
     starts, ends = np.flatnonzero(np.diff(air) == 1), np.flatnonzero(np.diff(air) == -1)
@@ -75,10 +82,8 @@ def main() -> None:
     print(f"{'skill':12s} {'':8s} feet>5cm ballistic both feet>2cm&ballistic touchdowns/s flight s")
     for skill, rec in zip(skills, recs):
         ref = F.clip_reference(skill)
-        reps = 3 if ref.loop else 1  # a looping clip three times, so a flight across the wrap is one flight
-        clip_pos, clip_rot = np.concatenate([ref.body_pos] * reps), np.concatenate([ref.body_rot] * reps)
         clip = flight_shares(ref.body_pos, ref.body_rot, ref.dt, ref.ground, ref.loop)
-        clip += step_timing(clip_pos, clip_rot, ref.dt, ref.ground)
+        clip += step_timing(*tile_loop(ref.body_pos, ref.body_rot, ref.loop), ref.dt, ref.ground)
         eps = []
         for e in range(args.k):
             pos, rot = rec.body_pos[e, : rec.lengths[e]], rec.body_rot[e, : rec.lengths[e]]
