@@ -141,6 +141,22 @@ repro-cgail-3skill-window-seed2: install ## cgail: run H's command at seed 2 wit
 	W=$$(ls -d $(CGAIL_FID)/H-window-seed2/cgail/*/ | tail -1); \
 	$(CHARCTL) eval $$W --fidelity -k 4 && $(CHARCTL) eval $$W --survival 5 -k 32 && $(CHARCTL) eval $$W --dtw --confusion --switch walk right_kick -k 8
 
+# Table 6.1's AMP column on three skills: the small preset's recipe without the command (cgail.conditional=false:
+# no class head, one style logit, no command in the state; the tracking reward, the terminations and the phase kept),
+# with env.switch_prob=0 because a switch the policy cannot see would only end its episodes (docs/cgail.md,
+# "A multi-skill AMP baseline"). And run H's command with the moving walk reference at run H's own seed, to separate
+# the window's effect on the kick from the seed's ("Run H at a second seed").
+.PHONY: repro-cgail-3skill-amp repro-cgail-3skill-window
+repro-cgail-3skill-amp: install ## cgail: AMP baseline on walk, run, right_kick = the small preset without the command (4e7 samples; ~70 min on 2 cores), evaluated
+	$(CHARCTL) train cgail cgail.conditional=false env.switch_prob=0 train.total_samples=$(CGAIL_FID_SAMPLES) train.checkpoint_every=20 train.keep_checkpoint_every=2500000 seed=1 output_root=$(CGAIL_FID)/amp-3skill
+	M=$$(ls -d $(CGAIL_FID)/amp-3skill/cgail/*/ | tail -1); \
+	$(CHARCTL) eval $$M --fidelity -k 4 && $(CHARCTL) eval $$M --survival 5 -k 32 && $(CHARCTL) eval $$M --dtw -k 8
+
+repro-cgail-3skill-window: install ## cgail: run H's command with reward.goal_reference_window=3 at seed 1 (4e7 samples; ~70 min on 2 cores), evaluated
+	$(CHARCTL) train cgail reward.goal_reference_window=3 train.total_samples=$(CGAIL_FID_SAMPLES) train.checkpoint_every=20 train.keep_checkpoint_every=2500000 seed=1 output_root=$(CGAIL_FID)/H-window
+	W=$$(ls -d $(CGAIL_FID)/H-window/cgail/*/ | tail -1); \
+	$(CHARCTL) eval $$W --fidelity -k 4 && $(CHARCTL) eval $$W --survival 5 -k 32 && $(CHARCTL) eval $$W --dtw --confusion --switch walk right_kick -k 8
+
 .PHONY: repro-cgail-10skill-track4
 repro-cgail-10skill-track4: install ## cgail: the window run's ten-skill command with reward.w_track=4.0 (1.5e8 samples; ~5 h on 2 cores, resumable), evaluated
 	$(CHARCTL) train cgail "use_skills=[]" reward.w_track=4.0 reward.root_height_threshold=0.15 reward.yaw_error_threshold=1.5 reward.goal_reference_window=3 train.fidelity_every=2000000 train.total_samples=150000000 train.checkpoint_every=20 train.keep_checkpoint_every=2500000 seed=1 output_root=$(CGAIL_FID)/track4-10skill
