@@ -33,6 +33,7 @@ import pytest
 
 from conftest import CHARCTL, REPO, assert_one_line_error, charctl_in_process, cli_env, run_charctl, snapshot
 
+AMP_RUN = REPO / "pretrained" / "amp-3skill"  # a shipped unconditional (AMP) run, read only
 LIMIT = 900  # seconds: an upper bound for any one command (the suite takes ~2 min on 2 idle cores)
 
 
@@ -176,7 +177,8 @@ def zero_quaternion_file(tmp_path_factory) -> Path:
 # ---------------------------------------------------------------------------- bad input
 # (id, arguments, words the error line must contain, extra environment). Placeholders: {out}
 # output_root inside the sandbox, {tmp} the sandbox, {ro} an unwritable folder, {file} a plain
-# file, {cgail} a finished cgail smoke run, {zeroq} a DeepMimic file with an all-zero quaternion.
+# file, {cgail} a finished cgail smoke run, {zeroq} a DeepMimic file with an all-zero quaternion, {amp} the shipped
+# unconditional three-skill run (pretrained/amp-3skill).
 BAD_INPUTS = [
     # cgail
     ("cgail-num-envs-0", "train cgail scale=smoke env.num_envs=0 output_root={out}", ["env.num_envs", ">= 1"], {}),
@@ -193,6 +195,12 @@ BAD_INPUTS = [
         "cgail-export-unknown-skill",
         "export {cgail} --onnx {tmp}/p.onnx --commands walk:0,run:3",
         ["run", "walk, right_kick"],
+        {},
+    ),
+    (
+        "cgail-export-amp-switch",
+        "export {amp} --bvh {tmp}/a.bvh --commands walk:0,right_kick:2",
+        ["AMP run", "no command input", "--commands SKILL:0"],
         {},
     ),
     ("cgail-export-read-only", "export {cgail} --torchscript {ro}/p.pt", ["{ro}/p.pt"], {}),
@@ -303,6 +311,7 @@ def _run_bad_input(case, root: Path, cgail: Path | None, zeroq: Path) -> dict:
         "file": plain_file,
         "cgail": cgail,
         "zeroq": zeroq,
+        "amp": AMP_RUN,
     }
     env = cli_env()
     for k, v in extra_env.items():
@@ -310,7 +319,9 @@ def _run_bad_input(case, root: Path, cgail: Path | None, zeroq: Path) -> dict:
             env.pop(k, None)
         else:
             env[k] = v
-    watched = [sandbox] + ([cgail] if cgail and "{cgail}" in template else [])
+    watched = (
+        [sandbox] + ([cgail] if cgail and "{cgail}" in template else []) + ([AMP_RUN] if "{amp}" in template else [])
+    )
     before = snapshot(*watched)
     args = [a.format(**values) for a in template.split()]
     if name in IN_SUBPROCESS:

@@ -140,6 +140,12 @@ def export(target: str, options: dict, overrides: list[str]) -> None:
     # every argument is checked before anything is written (the schedule names the run's skills)
     names = tr.skill_names
     schedule = parse_schedule(options.get("commands") or f"{names[0]}:0", names)
+    if not tr.agent.conditional and len({k for _, k in schedule}) > 1:
+        raise CharctlError(
+            f"{run_dir} is an AMP run (cgail.conditional=false): its policy has no command input, so a schedule "
+            "that changes the skill changes nothing it sees; give one skill (--commands SKILL:0 starts in that "
+            "skill's clip)"
+        )
     if options.get("web") and tr.cfg.reward.kind == "tracking":
         raise CharctlError(
             f"{run_dir} is a tracking run: its policy needs the reference clip's phase, which the web demo "
