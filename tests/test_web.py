@@ -55,13 +55,12 @@ def node(script: str, *args: str, timeout: float = 180) -> subprocess.CompletedP
     return res
 
 
-@pytest.fixture(scope="module")
-def served(tmp_path_factory):
-    """`charctl export pretrained/cgail-3skill-fidelity --web DIR --serve` running: (site folder, URL)."""
+def _serve(run: Path, tmp_path_factory):
+    """`charctl export RUN --web DIR --serve` running: yields (site folder, URL, the command's output lines)."""
     site = tmp_path_factory.mktemp("web") / "site"
     exe = [str(CHARCTL)] if CHARCTL.exists() else [sys.executable, "-c", "from charctl.cli import main; main()"]
     proc = subprocess.Popen(
-        [*exe, "export", str(RUN), "--web", str(site), "--serve"],
+        [*exe, "export", str(run), "--web", str(site), "--serve"],
         cwd=REPO,
         env=cli_env(),
         stdout=subprocess.PIPE,
@@ -88,6 +87,12 @@ def served(tmp_path_factory):
         proc.wait(timeout=20)
     except subprocess.TimeoutExpired:
         proc.kill()
+
+
+@pytest.fixture(scope="module")
+def served(tmp_path_factory):
+    """`charctl export pretrained/cgail-3skill-fidelity --web DIR --serve` running: (site folder, URL)."""
+    yield from _serve(RUN, tmp_path_factory)
 
 
 @pytest.fixture(scope="module")
@@ -379,6 +384,34 @@ def test_page_runs_in_headless_chromium(served, tmp_path):
     for png in ("page_0s.png", "page_5s.png"):
         assert _character_pixels(shots / png) > 300, f"no character in {png}"
     assert (shots / "page_0s.png").read_bytes() != (shots / "page_5s.png").read_bytes()
+    assert res.returncode == 0
+
+
+AMP_RUN = REPO / "pretrained" / "amp-3skill"  # unconditional: no command input
+
+
+@pytest.fixture(scope="module")
+def served_amp(tmp_path_factory):
+    """The shipped three-skill AMP run's site, served."""
+    yield from _serve(AMP_RUN, tmp_path_factory)
+
+
+@pytest.mark.skipif(not CHROMIUM.exists(), reason=f"no Chromium at {CHROMIUM}: `make web-test-deps` installs it")
+def test_amp_page_restarts_in_the_pressed_skill(served_amp, tmp_path):
+    """An AMP run has no command input, so its page restarts the character in the pressed skill's clip: 2.5 s
+    after key `2` the simulated time is 2.5 s since that restart (a conditional run's page goes on from the
+    ~8 s the browser script has run by then), in the run clip's start state, not fallen."""
+    _, url, _ = served_amp
+    shots = tmp_path / "shots"
+    res = node("browser.mjs", "--url", url, "--out", str(shots), "--chromium", str(CHROMIUM), timeout=300)
+    r = json.loads((shots / "result.json").read_text())
+    assert not r["errors"], r["errors"]
+    assert not r["page_error"], r["page_error"]
+    assert r["command_after_key"] == "run"
+    after = r["status_after_switch"]
+    assert after["command"] == "run" and after["w"] == 1.0  # restarted in the run, no ramp
+    assert 1.0 < after["time"] < 5.0, after["time"]  # ~2.5 s since the restart, not ~10.5 s on
+    assert not after["fallen"] and after["falls"] == 0
     assert res.returncode == 0
 
 

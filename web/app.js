@@ -253,7 +253,12 @@ function buildPanel(worker, meta) {
   const skills = $('skills');
   const bars = $('bars');
   bars.innerHTML = '<div class="bar legend"><span></span><span>command c&#772;</span><span>classifier</span></div>';
-  const command = (k) => worker.postMessage({ type: 'command', k });
+  // an AMP run (meta.conditional false) has no command input: its skill is picked by the pose it starts in, so a
+  // skill button or key restarts the character in that skill's clip instead of ramping a command it cannot see
+  const command = (k) => {
+    worker.postMessage({ type: 'command', k });
+    if (!meta.conditional) worker.postMessage({ type: 'reset' });
+  };
   meta.skills.forEach((s, k) => {
     const b = document.createElement('button');
     b.textContent = `${s.key} ${s.name}`;
