@@ -19,6 +19,7 @@ import pytest
 import charctl  # noqa: F401  (first: picks MuJoCo's headless GL backend before any test imports mujoco)
 
 REPO = Path(__file__).resolve().parent.parent
+AMP_RUN = REPO / "pretrained" / "amp-3skill"  # the shipped unconditional (AMP) three-skill run, read only
 VENV_BIN = Path(sys.executable).parent
 CHARCTL = VENV_BIN / "charctl"
 

@@ -31,9 +31,8 @@ from pathlib import Path
 
 import pytest
 
-from conftest import CHARCTL, REPO, assert_one_line_error, charctl_in_process, cli_env, run_charctl, snapshot
+from conftest import AMP_RUN, CHARCTL, REPO, assert_one_line_error, charctl_in_process, cli_env, run_charctl, snapshot
 
-AMP_RUN = REPO / "pretrained" / "amp-3skill"  # a shipped unconditional (AMP) run, read only
 LIMIT = 900  # seconds: an upper bound for any one command (the suite takes ~2 min on 2 idle cores)
 
 

@@ -30,7 +30,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from conftest import CHARCTL, REPO, assert_one_line_error, cli_env, run_charctl
+from conftest import AMP_RUN, CHARCTL, REPO, assert_one_line_error, cli_env, run_charctl
 
 WEB = REPO / "web"
 TESTS_WEB = REPO / "tests" / "web"
@@ -356,22 +356,33 @@ def _character_pixels(png: Path) -> int:
     return int(((r - g > 40) & (r - b > 60)).sum())
 
 
-@pytest.mark.skipif(
+NEEDS_CHROMIUM = pytest.mark.skipif(
     not CHROMIUM.exists(),
     reason=f"no Chromium at {CHROMIUM}: `make web-test-deps` installs Debian's chromium (as root, with apt-get)",
 )
+
+
+def _browse(url: str, shots: Path) -> dict:
+    """tests/web/browser.mjs on the served page (screenshots and result.json into `shots`): its result, after the
+    checks every page must pass (the script finished, no console or page error)."""
+    res = node("browser.mjs", "--url", url, "--out", str(shots), "--chromium", str(CHROMIUM), timeout=300)
+    r = json.loads((shots / "result.json").read_text())
+    assert not r["errors"], r["errors"]
+    assert not r["page_error"], r["page_error"]
+    assert res.returncode == 0
+    return r
+
+
+@NEEDS_CHROMIUM
 def test_page_runs_in_headless_chromium(served, tmp_path):
     site, url, _ = served
     shots = tmp_path / "shots"
-    res = node("browser.mjs", "--url", url, "--out", str(shots), "--chromium", str(CHROMIUM), timeout=300)
-    r = json.loads((shots / "result.json").read_text())
+    r = _browse(url, shots)
     print(
         f"headless Chromium: load {r.get('load_ms', 0) / 1000:.2f} s ({r.get('load_wall_ms', 0) / 1000:.2f} s from "
         f"navigation), {r.get('fps', 0):.1f} frames/s, real-time factor {r.get('sim_real_time_factor') or 0:.2f}, "
         f"control step {r.get('step_ms') or 0:.1f} ms (median); 5 s of simulation in {r.get('run_wall_s')} s"
     )
-    assert not r["errors"], r["errors"]
-    assert not r["page_error"], r["page_error"]
     assert all(u.startswith(url) or u.startswith("data:") for u in r["requests"]), r["requests"]
     s0, s5 = r["status_0"], r["status_5"]
     assert s0["time"] == 0 and s0["paused"] and s0["command"] == "walk" and r["command_0"] == "walk"
@@ -384,10 +395,6 @@ def test_page_runs_in_headless_chromium(served, tmp_path):
     for png in ("page_0s.png", "page_5s.png"):
         assert _character_pixels(shots / png) > 300, f"no character in {png}"
     assert (shots / "page_0s.png").read_bytes() != (shots / "page_5s.png").read_bytes()
-    assert res.returncode == 0
-
-
-AMP_RUN = REPO / "pretrained" / "amp-3skill"  # unconditional: no command input
 
 
 @pytest.fixture(scope="module")
@@ -396,23 +403,18 @@ def served_amp(tmp_path_factory):
     yield from _serve(AMP_RUN, tmp_path_factory)
 
 
-@pytest.mark.skipif(not CHROMIUM.exists(), reason=f"no Chromium at {CHROMIUM}: `make web-test-deps` installs it")
+@NEEDS_CHROMIUM
 def test_amp_page_restarts_in_the_pressed_skill(served_amp, tmp_path):
     """An AMP run has no command input, so its page restarts the character in the pressed skill's clip: 2.5 s
     after key `2` the simulated time is 2.5 s since that restart (a conditional run's page goes on from the
     ~8 s the browser script has run by then), in the run clip's start state, not fallen."""
     _, url, _ = served_amp
-    shots = tmp_path / "shots"
-    res = node("browser.mjs", "--url", url, "--out", str(shots), "--chromium", str(CHROMIUM), timeout=300)
-    r = json.loads((shots / "result.json").read_text())
-    assert not r["errors"], r["errors"]
-    assert not r["page_error"], r["page_error"]
+    r = _browse(url, tmp_path / "shots")
     assert r["command_after_key"] == "run"
     after = r["status_after_switch"]
     assert after["command"] == "run" and after["w"] == 1.0  # restarted in the run, no ramp
     assert 1.0 < after["time"] < 5.0, after["time"]  # ~2.5 s since the restart, not ~10.5 s on
     assert not after["fallen"] and after["falls"] == 0
-    assert res.returncode == 0
 
 
 # ---------------------------------------------------------------------------- env.phase_obs in the page
