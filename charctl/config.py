@@ -295,6 +295,34 @@ def _force_schema_keys(overrides: list[str], schema: type | None) -> list[str]:
     return out
 
 
+def apply_overrides(cfg, overrides: list[str]):
+    """`cfg` (a recorded run's OmegaConf config) with Hydra-style `overrides` applied as a fresh `charctl train`
+    applies them (Hydra's own parser: `k={a:1,b:2}`, `k=[1,2]`, `~k`), for `--resume RUN k=v ...`.
+
+    A value replaces a leaf and merges into a mapping (Hydra's `OmegaConf.update(..., merge=True)`); `~k` removes
+    the key, so validation gives it the schema's default. A value Hydra cannot parse is a one-line CharctlError."""
+    from hydra.core.override_parser.overrides_parser import OverridesParser
+    from hydra.errors import HydraException
+    from omegaconf import OmegaConf
+
+    _check_override_syntax(overrides)
+    try:
+        parsed = OverridesParser.create().parse_overrides(overrides)
+    except HydraException as exc:
+        raise CharctlError(f"bad override ({_first_line(exc)}); overrides: {' '.join(overrides)}") from None
+    cfg = OmegaConf.create(OmegaConf.to_container(cfg))  # plain and unlocked: a copy the overrides may extend
+    for o in parsed:
+        key = o.key_or_group
+        if o.is_delete():
+            parent, _, leaf = key.rpartition(".")
+            node = OmegaConf.select(cfg, parent) if parent else cfg
+            if node is not None and leaf in node:
+                node.pop(leaf)
+        else:
+            OmegaConf.update(cfg, key, o.value(), merge=True)
+    return cfg
+
+
 def _check_override_syntax(overrides: list[str]) -> None:
     """Each override is key=value, or ~key (Hydra's delete: the key falls back to the schema's default)."""
     for o in overrides:

@@ -191,8 +191,6 @@ def run_experiment(run_dir: str | Path) -> str:
 
 def open_run(run_dir: str | Path, schema: type | None = None, overrides: list[str] | None = None) -> Run:
     """Re-open an existing run (for --resume or evaluation), validating its config against `schema`."""
-    from omegaconf import OmegaConf
-
     from charctl.config import drop_removed_keys, validate
 
     run_dir = Path(run_dir)
@@ -202,10 +200,9 @@ def open_run(run_dir: str | Path, schema: type | None = None, overrides: list[st
         drop_removed_keys(cfg, schema, run_dir)
     remove_stale_temp_files(run_dir)
     if overrides:
-        from charctl.config import _check_override_syntax
+        from charctl.config import apply_overrides
 
-        _check_override_syntax(overrides)
-        cfg = OmegaConf.merge(cfg, OmegaConf.from_dotlist(overrides))
+        cfg = apply_overrides(cfg, overrides)
     if schema is not None:
         cfg = validate(cfg, schema, experiment)
     return Run(dir=run_dir, experiment=experiment, cfg=cfg, resumed=True)

@@ -302,9 +302,12 @@ def test_resume_with_overrides_records_them_in_the_run_config(smoke_run_copy):
     with pytest.raises(CharctlError, match="hidden"):
         train_command("cgail", ["ppo.hidden=[16]", "train.total_samples=2048"], resume=run_dir)
     assert (run_dir / "config.yaml").read_text() == before and not (run_dir / "resumes.txt").exists()
-    train_command("cgail", ["train.total_samples=1024", "reward.low_style_threshold=0.05"], resume=run_dir)
+    overrides = ["train.total_samples=1024", "reward.low_style_threshold=0.05", "reward.pose_error_threshold=0.5"]
+    overrides.append("reward.w_track_skills={walk:2.0}")
+    train_command("cgail", overrides, resume=run_dir)  # Hydra's dict syntax, as on a fresh train
     cfg = OmegaConf.load(run_dir / "config.yaml")
     assert cfg.train.total_samples == 1024 and cfg.reward.low_style_threshold == 0.05
+    assert OmegaConf.to_container(cfg.reward.w_track_skills) == {"walk": 2.0}
     assert "reward.low_style_threshold=0.05" in (run_dir / "resumes.txt").read_text()
 
 
