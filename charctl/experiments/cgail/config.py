@@ -79,6 +79,13 @@ class EnvConfig:
     start_failure_weight: float = ranged(0.0, ge=0, le=1)
     start_failure_lead: int = ranged(10, ge=0)  # control frames (0.33 s at 30 Hz)
     start_failure_halflife: float = ranged(300.0, gt=0)  # control steps after which the failure counts have halved
+    # Starts from the policy's own states (charctl.experiments.cgail.own_starts; docs/cgail.md "Starts from the
+    # policy's own states"): this share of a skill's training starts restores a physics state the policy itself
+    # reached where that skill's timed reference restarted at frame 0 (its next pass, or the end of a command ramp
+    # into it), with the reference at frame 0 and the restart's grace steps; the rest are RSI. Skills without a
+    # heading goal only (a heading goal's reference is the closest frame). 0 = RSI only (the paper). env.backend=cpu.
+    own_start_weight: float = ranged(0.0, ge=0, le=1)
+    own_start_capacity: int = ranged(4096, ge=1)  # restart states kept, the newest replacing the oldest
     action_scale: float = ranged(1.0, gt=0)  # PD target (rad) = rest pose + action_scale * action
     fall_tolerance: float = ranged(0.005, ge=0)  # m: a non-foot body this close to the ground ends the episode (a fall)
     goal_max_angle_deg: float = 45.0  # new heading goals lie within +- this angle of the current heading
@@ -357,8 +364,8 @@ def _check_disc(cfg) -> str | None:
 
 
 def _check_env(cfg) -> str | None:
-    """Physics and control rates, fall-weighted commands and failure-weighted start frames (the ranges are declared
-    on the fields)."""
+    """Physics and control rates, fall-weighted commands, failure-weighted start frames and starts from the policy's
+    own states (the ranges are declared on the fields)."""
     env = cfg.env
     ratio = env.physics_hz / env.control_hz
     if abs(ratio - round(ratio)) > 1e-6:
@@ -372,6 +379,15 @@ def _check_env(cfg) -> str | None:
             "env.start_failure_weight needs a timed reference to place failures in the clip: env.phase_obs=true, "
             "reward.pose_error_threshold > 0 or reward.kind=tracking"
         )
+    if env.own_start_weight > 0:
+        if env.backend != "cpu":
+            return "env.own_start_weight > 0 needs env.backend=cpu (the kept states are numpy arrays)"
+        r = cfg.reward
+        if r.kind != "adversarial" or not (env.phase_obs or r.pose_error_threshold > 0) or r.pose_error_grace_steps < 1:
+            return (
+                "env.own_start_weight > 0 needs a reference that restarts at frame 0: reward.kind=adversarial with "
+                "env.phase_obs=true or reward.pose_error_threshold > 0, and reward.pose_error_grace_steps >= 1"
+            )
     return None
 
 

@@ -35,6 +35,7 @@ from charctl.experiments.cgail import start_frames
 from charctl.experiments.cgail.env_arrays import arrays_for, simulator
 from charctl.experiments.cgail.env_rows import IndexRows, MaskRows
 from charctl.experiments.cgail.env_rules import env_reference_check
+from charctl.experiments.cgail.own_starts import OwnStarts, restarted_here
 from charctl.experiments.cgail.features import DISC_OBS_DIM, Kinematics, disc_obs, heading_frame, policy_state
 from charctl.experiments.cgail.rules import (
     advance_ramp,
@@ -106,6 +107,11 @@ class CgailEnv:
         self.state_dim = state_dim(tracking or self.phase_obs)
         self.obs_dim = self.state_dim
         self._init_env_state()
+        self.own_starts = (  # env.own_start_weight: restart states of the policy's own (numpy only)
+            OwnStarts(int(env_cfg.own_start_capacity), self.rsi_qpos.shape[-1], self.rsi_qvel.shape[-1])
+            if getattr(env_cfg, "own_start_weight", 0.0) > 0
+            else None
+        )
         self.reset(a.array([True] * self.N, a.bool_dtype))
 
     # the row form of the array library (its random state, for checkpoints, is `self.arrays.random_state()`)
@@ -221,6 +227,11 @@ class CgailEnv:
         skill, frames, yaw, goal_offset = draws
         qpos = self.rsi_qpos[skill, frames]  # advanced indexing: copies
         qvel = self.rsi_qvel[skill, frames]
+        grace = 0
+        if self.own_starts is not None and self.start_frame is None:  # a forced frame (evaluation) starts there
+            own, slots = self.own_starts.draw(self.arrays.rng, skill, self.cfg.own_start_weight)
+            qpos[own], qvel[own], frames[own] = self.own_starts.qpos[slots], self.own_starts.qvel[slots], 0
+            grace = np.where(own, self.pose_grace, 0)  # as a restart at frame 0 has
         R = rotations_for(qpos)
         turn = R.heading_quat(yaw)
         qpos[:, 0] = 0.0
@@ -235,7 +246,7 @@ class CgailEnv:
         self.steps = rows.put(self.steps, 0)
         self.ref_frame = rows.put(self.ref_frame, frames)
         self.ref_active = rows.put(self.ref_active, True)
-        self.ref_grace = rows.put(self.ref_grace, 0)
+        self.ref_grace = rows.put(self.ref_grace, grace)
         self.yaw_err = rows.put(self.yaw_err, 0.0)
         k = self.arrays.kinematics(None if isinstance(rows, MaskRows) else rows)
         self.goal_angle = rows.put(self.goal_angle, R.yaw_about_y(k.body_rot[:, 0]) + goal_offset)
@@ -361,6 +372,8 @@ class CgailEnv:
         self._advance_ramp()
         if self.timed_reference:
             self._restart_reference_after_ramp()
+        if self.own_starts is not None:
+            self._keep_own_starts(done)
         self.reset(done)
         self._maybe_switch(~done)  # the envs that did not just reset
         return StepResult(
@@ -376,6 +389,13 @@ class CgailEnv:
             pose_ended,
             scored,
         )
+
+    def _keep_own_starts(self, done) -> None:
+        """env.own_start_weight: keep the physics states of the envs whose timed reference restarted at frame 0 this
+        step (`own_starts.restarted_here`), except those that ended and skills with a heading goal."""
+        fresh = restarted_here(self.ref_grace, self.ref_active, self.pose_grace) & ~done & ~self.has_goal[self.cmd]
+        ids = np.flatnonzero(fresh)
+        self.own_starts.keep(self.sim.qpos[ids], self.sim.qvel[ids], self.cmd[ids])
 
     def _maybe_switch(self, mask) -> None:
         """Switch each env in `mask` to a random command with probability env.switch_prob."""

@@ -126,7 +126,8 @@ def _make_env(agent, num_envs: int, seed: int, episode_seconds: float):
 
     env_cfg = OmegaConf.merge(
         agent.cfg.env,
-        {"num_envs": num_envs, "switch_prob": 0.0, "episode_seconds": episode_seconds, "start_failure_weight": 0.0},
+        {"num_envs": num_envs, "switch_prob": 0.0, "episode_seconds": episode_seconds}
+        | {"start_failure_weight": 0.0, "own_start_weight": 0.0},  # uniform RSI: the starts are training rules
     )
     env = CgailEnv(
         agent.skills,

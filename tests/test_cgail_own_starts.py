@@ -1,0 +1,115 @@
+"""Starts from the policy's own states (env.own_start_weight, `charctl.experiments.cgail.own_starts`): the ring by
+hand values, the draw keeping each start's skill, the restart detection, and the env keeping a restart's physics
+state and starting an episode from it at frame 0 with the restart's grace steps."""
+
+import numpy as np
+import pytest
+from omegaconf import OmegaConf
+
+from charctl.experiments.cgail.config import EnvConfig, SkillConfig
+from charctl.experiments.cgail.env import CgailEnv
+from charctl.experiments.cgail.own_starts import OwnStarts, restarted_here
+from charctl.experiments.cgail.skills import load_skills
+
+
+def test_the_ring_keeps_the_newest_states():
+    ring = OwnStarts(3, nq=1, nv=1)
+    ring.keep(np.array([[0.0], [1.0]]), np.array([[10.0], [11.0]]), np.array([0, 0]))
+    ring.keep(np.array([[2.0], [3.0]]), np.array([[12.0], [13.0]]), np.array([1, 1]))  # 3 replaces 0 (slot 0)
+    assert ring.qpos[:, 0].tolist() == [3.0, 1.0, 2.0] and ring.qvel[:, 0].tolist() == [13.0, 11.0, 12.0]
+    assert ring.skill.tolist() == [1, 0, 1] and ring.written == 4
+    ring.keep(np.arange(5.0)[:, None] + 20, np.zeros((5, 1)), np.arange(5))  # more than fit: the last three
+    assert sorted(ring.qpos[:, 0].tolist()) == [22.0, 23.0, 24.0] and sorted(ring.skill.tolist()) == [2, 3, 4]
+    assert ring.written == 9
+
+
+def test_a_start_takes_a_kept_state_of_its_own_skill():
+    ring = OwnStarts(3, nq=1, nv=1)
+    ring.keep(np.zeros((3, 1)), np.zeros((3, 1)), np.array([1, 0, 1]))
+    rng = np.random.default_rng(0)
+    own, slots = ring.draw(rng, np.array([0, 1, 2, 1]), weight=1.0)
+    assert own.tolist() == [True, True, False, True]  # skill 2 has no kept state
+    assert slots[0] == 1 and set(slots[1:].tolist()) <= {0, 2}
+    own, slots = ring.draw(rng, np.array([0, 1, 2, 1]), weight=0.0)
+    assert not own.any() and slots.size == 0
+
+
+def test_a_restart_is_where_the_grace_counter_was_just_set():
+    grace = np.array([10, 9, 0, 10])
+    active = np.array([True, True, True, False])  # env 3: its reference waits for a ramp
+    assert restarted_here(grace, active, 10).tolist() == [True, False, False, False]
+
+
+@pytest.fixture(scope="module")
+def kick():
+    return load_skills([SkillConfig("kick", "kick")], 30.0)
+
+
+def _env(kick, n=2, weight=1.0):
+    cfg = OmegaConf.structured(EnvConfig(num_envs=n, switch_prob=0.0, own_start_weight=weight, own_start_capacity=8))
+    return CgailEnv(kick, cfg, seed=0, pose_error_threshold=100.0, pose_error_grace_steps=3)
+
+
+def test_the_env_keeps_the_state_where_the_kick_restarts(kick):
+    """Two steps before the kick clip's end: one step reaches its last frame, the next restarts it at frame 0 and
+    keeps both envs' physics states as they are after that step."""
+    env = _env(kick)
+    env.ref_frame[:] = len(kick[0].obs) - 2
+    nu = env.sim.layout.nu
+    env.step(np.zeros((2, nu)))
+    assert env.own_starts.written == 0
+    env.step(np.zeros((2, nu)))
+    assert env.ref_frame.tolist() == [0, 0] and env.own_starts.written == 2
+    np.testing.assert_array_equal(env.own_starts.qpos[:2], env.sim.qpos)
+    np.testing.assert_array_equal(env.own_starts.qvel[:2], env.sim.qvel)
+
+
+def test_a_reset_starts_from_a_kept_state_at_frame_0_with_grace(kick):
+    """With weight 1 every kick start restores a kept state (moved to x = z = 0, no yaw turn here); the reference
+    starts at frame 0, unchecked for the grace steps. An evaluation's forced start frame starts from the clip."""
+    env = _env(kick)
+    env.random_yaw = False
+    qpos, qvel = env.rsi_qpos[0, 20].copy(), env.rsi_qvel[0, 20].copy()
+    qpos[0], qpos[2] = 3.0, -2.0
+    env.own_starts.keep(qpos[None], qvel[None], np.array([0]))
+    env.reset(np.arange(2))
+    want = qpos.copy()
+    want[0] = want[2] = 0.0
+    np.testing.assert_allclose(env.sim.qpos, np.stack([want, want]), atol=1e-12)
+    np.testing.assert_allclose(env.sim.qvel, np.stack([qvel, qvel]), atol=1e-12)
+    assert env.ref_frame.tolist() == [0, 0] and env.ref_grace.tolist() == [3, 3]
+    env.start_frame = 20
+    env.reset(np.arange(2))
+    assert env.ref_frame.tolist() == [20, 20] and env.ref_grace.tolist() == [0, 0]
+
+
+def test_the_starts_are_off_in_evaluation_envs_and_need_the_cpu_env_and_a_restarting_reference():
+    from charctl.config import compose_config
+    from charctl.errors import CharctlError
+    from charctl.experiments.cgail.config import Config
+    from charctl.experiments.cgail.env_rules import env_rules
+    from charctl.experiments.cgail.fidelity import _make_env
+    from charctl.experiments.cgail.policy import load_trained_run
+
+    from conftest import REPO
+
+    tr = load_trained_run(REPO / "pretrained/cgail-3skill-fidelity")
+    tr.cfg.env.own_start_weight = 0.5
+    assert tr.make_env(2).own_starts is None and _make_env(tr.agent, 2, 0, 1.0).own_starts is None
+    assert tr.make_env(2, rules=env_rules(tr.cfg.reward)).own_starts is not None  # a diagnostic of the training rules
+    for extra, words in [
+        (["env.backend=torch", "device=cpu"], "needs env.backend=cpu"),
+        (["reward.pose_error_threshold=0", "env.phase_obs=false"], "restarts at frame 0"),
+    ]:
+        with pytest.raises(CharctlError, match=words):
+            compose_config("cgail", ["scale=smoke", "env.own_start_weight=0.5", *extra], Config)
+    cfg = compose_config("cgail", ["scale=smoke", "env.own_start_weight=0.5", "env.phase_obs=true"], Config)
+    assert cfg.env.own_start_weight == 0.5
+
+
+def test_smoke_training_with_own_starts(tmp_path, charctl_main):
+    res = charctl_main(
+        "train", "cgail", "scale=smoke", "env.own_start_weight=0.5", "env.phase_obs=true", f"output_root={tmp_path}"
+    )
+    assert res.returncode == 0, res.stderr
+    assert "done: iterations=4" in res.stdout
