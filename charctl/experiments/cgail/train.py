@@ -228,6 +228,8 @@ class CgailLearner(AgentCounters):
             "train/unstable_rate": float(ro.unstable) / n,
             "sim/unstable_resets": float(ro.unstable),
         }
+        if env.own_starts is not None:  # env.own_start_weight: restart states kept so far
+            stats["train/own_start_states"] = float(env.own_starts.written)
         if agent.conditional:  # both envs keep per-skill failure rates (env.skill_fall_weight)
             stats.update({f"fall_rate/{sk.name}": float(r) for sk, r in zip(agent.skills, env.fall_rate.tolist())})
             stats["train/r_class"] = float(rew["r_class"].mean())
