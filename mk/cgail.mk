@@ -157,6 +157,15 @@ repro-cgail-3skill-window: install ## cgail: run H's command with reward.goal_re
 	W=$$(ls -d $(CGAIL_FID)/H-window/cgail/*/ | tail -1); \
 	$(CHARCTL) eval $$W --fidelity -k 4 && $(CHARCTL) eval $$W --survival 5 -k 32 && $(CHARCTL) eval $$W --dtw --confusion --switch walk right_kick -k 8
 
+# Starts from the policy's own states (env.own_start_weight=0.25: a quarter of the kick's starts restore a state the
+# policy reached where the kick's reference restarted at frame 0, after a pass or a walk/run -> kick ramp), at seed 2,
+# the seed whose kick starts only from the clip's frame 0 (docs/cgail.md "Starts from the policy's own states").
+.PHONY: repro-cgail-3skill-own-starts-seed2
+repro-cgail-3skill-own-starts-seed2: install ## cgail: run H's command at seed 2 with env.own_start_weight=0.25 (4e7 samples; ~70 min on 2 cores), evaluated
+	$(CHARCTL) train cgail env.own_start_weight=0.25 train.total_samples=$(CGAIL_FID_SAMPLES) train.checkpoint_every=20 train.keep_checkpoint_every=2500000 seed=2 output_root=$(CGAIL_FID)/own-starts-seed2
+	O=$$(ls -d $(CGAIL_FID)/own-starts-seed2/cgail/*/ | tail -1); \
+	$(CHARCTL) eval $$O --fidelity -k 4 && $(CHARCTL) eval $$O --survival 5 -k 32 && $(CHARCTL) eval $$O --dtw --confusion --switch walk right_kick -k 8
+
 .PHONY: repro-cgail-10skill-track4
 repro-cgail-10skill-track4: install ## cgail: the window run's ten-skill command with reward.w_track=4.0 (1.5e8 samples; ~5 h on 2 cores, resumable), evaluated
 	$(CHARCTL) train cgail "use_skills=[]" reward.w_track=4.0 reward.root_height_threshold=0.15 reward.yaw_error_threshold=1.5 reward.goal_reference_window=3 train.fidelity_every=2000000 train.total_samples=150000000 train.checkpoint_every=20 train.keep_checkpoint_every=2500000 seed=1 output_root=$(CGAIL_FID)/track4-10skill
