@@ -8,8 +8,13 @@ from charctl.errors import CharctlError
 
 
 def _recorded():
-    return OmegaConf.create({"reward": {"w_track": 1.0, "w_track_skills": {"spindance": 4.0, "breakdance": 4.0}},
-                             "use_skills": ["walk"], "seed": 1})
+    return OmegaConf.create(
+        {
+            "reward": {"w_track": 1.0, "w_track_skills": {"spindance": 4.0, "breakdance": 4.0}},
+            "use_skills": ["walk"],
+            "seed": 1,
+        }
+    )
 
 
 def test_hydra_values_parse_as_on_a_fresh_train():

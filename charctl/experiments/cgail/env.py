@@ -35,8 +35,8 @@ from charctl.experiments.cgail import start_frames
 from charctl.experiments.cgail.env_arrays import arrays_for, simulator
 from charctl.experiments.cgail.env_rows import IndexRows, MaskRows
 from charctl.experiments.cgail.env_rules import env_reference_check
-from charctl.experiments.cgail.own_starts import OwnStarts, restarted_here
 from charctl.experiments.cgail.features import DISC_OBS_DIM, Kinematics, disc_obs, heading_frame, policy_state
+from charctl.experiments.cgail.own_starts import OwnStarts, restarted_here
 from charctl.experiments.cgail.rules import (
     advance_ramp,
     advance_reference,
@@ -109,7 +109,7 @@ class CgailEnv:
         self._init_env_state()
         self.own_starts = (  # env.own_start_weight: restart states of the policy's own (numpy only)
             OwnStarts(int(env_cfg.own_start_capacity), self.rsi_qpos.shape[-1], self.rsi_qvel.shape[-1])
-            if getattr(env_cfg, "own_start_weight", 0.0) > 0
+            if env_cfg.own_start_weight > 0
             else None
         )
         self.reset(a.array([True] * self.N, a.bool_dtype))

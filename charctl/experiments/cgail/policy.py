@@ -43,7 +43,8 @@ class TrainedRun:
         `env_rules.env_rules(cfg.reward, ...)`."""
         from omegaconf import OmegaConf
 
-        evaluation = {"start_failure_weight": 0.0, "own_start_weight": 0.0} if rules is None else {}  # RSI: training rules
+        # RSI from the clips: the weighted and the own-state starts are training rules
+        evaluation = {"start_failure_weight": 0.0, "own_start_weight": 0.0} if rules is None else {}
         env_cfg = OmegaConf.merge(self.cfg.env, {"num_envs": num_envs, **evaluation, **env_overrides})
         rules = {"tracking": self.cfg.reward.kind == "tracking"} if rules is None else rules
         return CgailEnv(self.agent.skills, env_cfg, seed=seed, conditional=self.agent.conditional, **rules)
