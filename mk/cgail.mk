@@ -166,6 +166,15 @@ repro-cgail-3skill-own-starts-seed2: install ## cgail: run H's command at seed 2
 	O=$$(ls -d $(CGAIL_FID)/own-starts-seed2/cgail/*/ | tail -1); \
 	$(CHARCTL) eval $$O --fidelity -k 4 && $(CHARCTL) eval $$O --survival 5 -k 32 && $(CHARCTL) eval $$O --dtw --confusion --switch walk right_kick -k 8
 
+# The probe on top of it: that run's kept 2.5e7 checkpoint continued to 4e7 with the moving walk reference.
+.PHONY: repro-cgail-3skill-own-starts-window-seed2
+repro-cgail-3skill-own-starts-window-seed2: install ## cgail: the own-starts run's 2.5e7 checkpoint continued to 4e7 with reward.goal_reference_window=3 (needs repro-cgail-3skill-own-starts-seed2 first; ~30 min), evaluated
+	O=$$(ls -d $(CGAIL_FID)/own-starts-seed2/cgail/*/ | tail -1); P=$(CGAIL_FID)/own-starts-window-seed2/cgail/from-2.5e7; \
+	test -f $$O/checkpoints/samples_025001984.pt || { echo "error: run make repro-cgail-3skill-own-starts-seed2 first"; exit 2; }; \
+	rm -rf $$P && mkdir -p $$P/checkpoints && cp -r $$O/config.yaml $$O/tb $$P/ && cp $$O/checkpoints/samples_025001984.pt $$P/checkpoints/last.pt && \
+	$(CHARCTL) train cgail --resume $$P reward.goal_reference_window=3 && \
+	$(CHARCTL) eval $$P --fidelity -k 4 && $(CHARCTL) eval $$P --survival 5 -k 32 && $(CHARCTL) eval $$P --dtw --confusion --switch walk right_kick -k 8
+
 .PHONY: repro-cgail-10skill-track4
 repro-cgail-10skill-track4: install ## cgail: the window run's ten-skill command with reward.w_track=4.0 (1.5e8 samples; ~5 h on 2 cores, resumable), evaluated
 	$(CHARCTL) train cgail "use_skills=[]" reward.w_track=4.0 reward.root_height_threshold=0.15 reward.yaw_error_threshold=1.5 reward.goal_reference_window=3 train.fidelity_every=2000000 train.total_samples=150000000 train.checkpoint_every=20 train.keep_checkpoint_every=2500000 seed=1 output_root=$(CGAIL_FID)/track4-10skill
