@@ -61,6 +61,10 @@ from charctl.experiments.cgail.skills import SkillData
 from charctl.experiments.cgail.step_result import StepResult
 from charctl.motion.array_compat import namespace, rotations_for
 
+# Evaluation envs start from the clips: the weighted and the own-state starts are training rules (env config keys
+# set to these values by `policy.TrainedRun.make_env` without rules and by the fidelity evaluation's env).
+EVALUATION_STARTS = {"start_failure_weight": 0.0, "own_start_weight": 0.0}
+
 
 class CgailEnv:
     """N humanoids imitating K skills (the module docstring): numpy over C MuJoCo, or torch on a tensor simulator."""

@@ -122,12 +122,11 @@ def _make_env(agent, num_envs: int, seed: int, episode_seconds: float):
     """A CgailEnv of the agent's skills and env config: held commands, RSI at frame 0, no random yaw."""
     from omegaconf import OmegaConf
 
-    from charctl.experiments.cgail.env import CgailEnv
+    from charctl.experiments.cgail.env import EVALUATION_STARTS, CgailEnv
 
     env_cfg = OmegaConf.merge(
         agent.cfg.env,
-        {"num_envs": num_envs, "switch_prob": 0.0, "episode_seconds": episode_seconds}
-        | {"start_failure_weight": 0.0, "own_start_weight": 0.0},  # uniform RSI: the starts are training rules
+        {"num_envs": num_envs, "switch_prob": 0.0, "episode_seconds": episode_seconds, **EVALUATION_STARTS},
     )
     env = CgailEnv(
         agent.skills,

@@ -12,7 +12,7 @@ from charctl.errors import CharctlError
 from charctl.experiments.cgail.agent import Agent, build_agent, load_policy_state
 from charctl.experiments.cgail.config import method_label
 from charctl.experiments.cgail.drive import mean_action
-from charctl.experiments.cgail.env import CgailEnv
+from charctl.experiments.cgail.env import EVALUATION_STARTS, CgailEnv
 from charctl.motion import rotations as R
 
 
@@ -43,8 +43,7 @@ class TrainedRun:
         `env_rules.env_rules(cfg.reward, ...)`."""
         from omegaconf import OmegaConf
 
-        # RSI from the clips: the weighted and the own-state starts are training rules
-        evaluation = {"start_failure_weight": 0.0, "own_start_weight": 0.0} if rules is None else {}
+        evaluation = EVALUATION_STARTS if rules is None else {}
         env_cfg = OmegaConf.merge(self.cfg.env, {"num_envs": num_envs, **evaluation, **env_overrides})
         rules = {"tracking": self.cfg.reward.kind == "tracking"} if rules is None else rules
         return CgailEnv(self.agent.skills, env_cfg, seed=seed, conditional=self.agent.conditional, **rules)
