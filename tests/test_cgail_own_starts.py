@@ -4,6 +4,7 @@ state and starting an episode from it at frame 0 with the restart's grace steps.
 
 import numpy as np
 import pytest
+import torch
 from omegaconf import OmegaConf
 
 from charctl.experiments.cgail.config import EnvConfig, SkillConfig
@@ -12,26 +13,43 @@ from charctl.experiments.cgail.own_starts import OwnStarts, restarted_here
 from charctl.experiments.cgail.skills import load_skills
 
 
-def test_the_ring_keeps_the_newest_states():
-    ring = OwnStarts(3, nq=1, nv=1)
-    ring.keep(np.array([[0.0], [1.0]]), np.array([[10.0], [11.0]]), np.array([0, 0]))
-    ring.keep(np.array([[2.0], [3.0]]), np.array([[12.0], [13.0]]), np.array([1, 1]))  # 3 replaces 0 (slot 0)
-    assert ring.qpos[:, 0].tolist() == [3.0, 1.0, 2.0] and ring.qvel[:, 0].tolist() == [13.0, 11.0, 12.0]
-    assert ring.skill.tolist() == [1, 0, 1] and ring.written == 4
-    ring.keep(np.arange(5.0)[:, None] + 20, np.zeros((5, 1)), np.arange(5))  # more than fit: the last three
-    assert sorted(ring.qpos[:, 0].tolist()) == [22.0, 23.0, 24.0] and sorted(ring.skill.tolist()) == [2, 3, 4]
-    assert ring.written == 9
+def _ring(capacity: int, num_skills: int = 5, lib=np):
+    if lib is np:
+        return OwnStarts(capacity, 1, 1, num_skills, np.zeros, np.float64, np.int64)
+    return OwnStarts(capacity, 1, 1, num_skills, lambda s, d: torch.zeros(s, dtype=d), torch.float32, torch.int64)
 
 
-def test_a_start_takes_a_kept_state_of_its_own_skill():
-    ring = OwnStarts(3, nq=1, nv=1)
-    ring.keep(np.zeros((3, 1)), np.zeros((3, 1)), np.array([1, 0, 1]))
-    rng = np.random.default_rng(0)
-    own, slots = ring.draw(rng, np.array([0, 1, 2, 1]), weight=1.0)
-    assert own.tolist() == [True, True, False, True]  # skill 2 has no kept state
-    assert slots[0] == 1 and set(slots[1:].tolist()) <= {0, 2}
-    own, slots = ring.draw(rng, np.array([0, 1, 2, 1]), weight=0.0)
-    assert not own.any() and slots.size == 0
+@pytest.mark.parametrize("lib", [np, torch])
+def test_the_ring_keeps_the_newest_fresh_rows(lib):
+    ring = _ring(3, lib=lib)
+    a = lib.tensor if lib is torch else np.array
+    q = a([[0.0], [1.0], [9.0]])
+    ring.keep(q, q + 10, a([0, 0, 4]), a([True, True, False]))  # row 2 is not fresh
+    ring.keep(a([[2.0], [3.0]]), a([[12.0], [13.0]]), a([1, 1]), a([True, True]))  # 3 replaces 0 (slot 0)
+    assert ring.qpos[:3, 0].tolist() == [3.0, 1.0, 2.0] and ring.qvel[:3, 0].tolist() == [13.0, 11.0, 12.0]
+    assert ring.skill.tolist() == [1, 0, 1, -1] and int(ring.written) == 4
+    five = lib.arange(5.0)[:, None] + 20
+    # more than fit: the last three, each where it would be had all five been written in turn (slots 1, 2, 0, 1, 2)
+    ring.keep(five, five * 0, lib.arange(5), a([True] * 5))
+    assert ring.qpos[:3, 0].tolist() == [22.0, 23.0, 24.0] and ring.skill.tolist() == [2, 3, 4, -1]
+    assert int(ring.written) == 9
+
+
+@pytest.mark.parametrize("lib", [np, torch])
+def test_a_start_takes_a_kept_state_of_its_own_skill(lib):
+    """Kept skills [1, 0, 1] in slots 0..2: skill 1's states in slot order are slots 0 and 2, so u_slot 0.3 takes
+    the first (floor(0.3 * 2) = 0) and 0.7 the second; skill 2 has none; u_own >= weight starts from the clip."""
+    ring = _ring(4, lib=lib)
+    a = lib.tensor if lib is torch else np.array
+    ring.keep(lib.zeros((3, 1)), lib.zeros((3, 1)), a([1, 0, 1]), a([True] * 3))
+    skill = a([0, 1, 2, 1, 1])
+    u_own = a([0.1, 0.2, 0.3, 0.4, 0.9])
+    u_slot = a([0.99, 0.3, 0.5, 0.7, 0.0])
+    own, slots = ring.draw(skill, u_own, u_slot, weight=0.5)
+    assert own.tolist() == [True, True, False, True, False]
+    assert [int(slots[i]) for i in (0, 1, 3)] == [1, 0, 2]
+    own, _ = ring.draw(skill, u_own, u_slot, weight=0.0)
+    assert not own.any()
 
 
 def test_a_restart_is_where_the_grace_counter_was_just_set():
@@ -60,6 +78,7 @@ def test_the_env_keeps_the_state_where_the_kick_restarts(kick):
     assert env.own_starts.written == 0
     env.step(np.zeros((2, nu)))
     assert env.ref_frame.tolist() == [0, 0] and env.own_starts.written == 2
+    assert env.own_starts.skill[:2].tolist() == [0, 0]
     np.testing.assert_array_equal(env.own_starts.qpos[:2], env.sim.qpos)
     np.testing.assert_array_equal(env.own_starts.qvel[:2], env.sim.qvel)
 
@@ -71,7 +90,7 @@ def test_a_reset_starts_from_a_kept_state_at_frame_0_with_grace(kick):
     env.random_yaw = False
     qpos, qvel = env.rsi_qpos[0, 20].copy(), env.rsi_qvel[0, 20].copy()
     qpos[0], qpos[2] = 3.0, -2.0
-    env.own_starts.keep(qpos[None], qvel[None], np.array([0]))
+    env.own_starts.keep(qpos[None], qvel[None], np.array([0]), np.array([True]))
     env.reset(np.arange(2))
     want = qpos.copy()
     want[0] = want[2] = 0.0
@@ -83,7 +102,33 @@ def test_a_reset_starts_from_a_kept_state_at_frame_0_with_grace(kick):
     assert env.ref_frame.tolist() == [20, 20] and env.ref_grace.tolist() == [0, 0]
 
 
-def test_the_starts_are_off_in_evaluation_envs_and_need_the_cpu_env_and_a_restarting_reference():
+@pytest.mark.parametrize("compact", [True, False])
+def test_the_torch_env_keeps_and_starts_from_the_same_states(kick, compact):
+    """env.backend=torch (the Warp env's code on C MuJoCo's arrays): the same restart kept and the same start,
+    with the resets' rows as ids (the CPU's form) and as a mask (a GPU's form)."""
+    from charctl.experiments.cgail.env import CgailDeviceEnv
+    from charctl.sim.torch_view import TorchBatchedHumanoid
+
+    cfg = OmegaConf.structured(EnvConfig(num_envs=2, switch_prob=0.0, own_start_weight=1.0, own_start_capacity=8))
+    env = CgailDeviceEnv(
+        kick, cfg, seed=0, sim=TorchBatchedHumanoid(2), pose_error_threshold=100.0, pose_error_grace_steps=3
+    )
+    env.compact_rows = compact
+    env.ref_frame = torch.full_like(env.ref_frame, len(kick[0].obs) - 2)
+    for _ in range(2):
+        env.step(torch.zeros((2, env.sim.layout.nu)))
+    assert env.ref_frame.tolist() == [0, 0] and int(env.own_starts.written) == 2
+    torch.testing.assert_close(env.own_starts.qpos[:2], env.sim.qpos)
+    env.random_yaw = False
+    kept = env.own_starts.qpos[:2].clone()
+    env.reset(torch.ones(2, dtype=torch.bool))
+    want = kept.clone()
+    want[:, 0] = want[:, 2] = 0.0
+    assert sorted(map(tuple, env.sim.qpos.tolist())) == sorted(map(tuple, want.tolist()))
+    assert env.ref_frame.tolist() == [0, 0] and env.ref_grace.tolist() == [3, 3]
+
+
+def test_the_starts_are_off_in_evaluation_envs_and_need_a_restarting_reference():
     from charctl.config import compose_config
     from charctl.errors import CharctlError
     from charctl.experiments.cgail.config import Config
@@ -97,12 +142,9 @@ def test_the_starts_are_off_in_evaluation_envs_and_need_the_cpu_env_and_a_restar
     tr.cfg.env.own_start_weight = 0.5
     assert tr.make_env(2).own_starts is None and _make_env(tr.agent, 2, 0, 1.0).own_starts is None
     assert tr.make_env(2, rules=env_rules(tr.cfg.reward)).own_starts is not None  # a diagnostic of the training rules
-    for extra, words in [
-        (["env.backend=torch", "device=cpu"], "needs env.backend=cpu"),
-        (["reward.pose_error_threshold=0", "env.phase_obs=false"], "restarts at frame 0"),
-    ]:
-        with pytest.raises(CharctlError, match=words):
-            compose_config("cgail", ["scale=smoke", "env.own_start_weight=0.5", *extra], Config)
+    with pytest.raises(CharctlError, match="restarts at frame 0"):
+        overrides = ["reward.pose_error_threshold=0", "env.phase_obs=false"]
+        compose_config("cgail", ["scale=smoke", "env.own_start_weight=0.5", *overrides], Config)
     cfg = compose_config("cgail", ["scale=smoke", "env.own_start_weight=0.5", "env.phase_obs=true"], Config)
     assert cfg.env.own_start_weight == 0.5
 

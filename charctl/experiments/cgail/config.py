@@ -83,7 +83,7 @@ class EnvConfig:
     # policy's own states"): this share of a skill's training starts restores a physics state the policy itself
     # reached where that skill's timed reference restarted at frame 0 (its next pass, or the end of a command ramp
     # into it), with the reference at frame 0 and the restart's grace steps; the rest are RSI. Skills without a
-    # heading goal only (a heading goal's reference is the closest frame). 0 = RSI only (the paper). env.backend=cpu.
+    # heading goal only (a heading goal's reference is the closest frame). 0 = RSI only (the paper). Every backend.
     own_start_weight: float = ranged(0.0, ge=0, le=1)
     own_start_capacity: int = ranged(4096, ge=1)  # restart states kept, the newest replacing the oldest
     action_scale: float = ranged(1.0, gt=0)  # PD target (rad) = rest pose + action_scale * action
@@ -380,8 +380,6 @@ def _check_env(cfg) -> str | None:
             "reward.pose_error_threshold > 0 or reward.kind=tracking"
         )
     if env.own_start_weight > 0:
-        if env.backend != "cpu":
-            return "env.own_start_weight > 0 needs env.backend=cpu (the kept states are numpy arrays)"
         r = cfg.reward
         if r.kind != "adversarial" or not (env.phase_obs or r.pose_error_threshold > 0) or r.pose_error_grace_steps < 1:
             return (

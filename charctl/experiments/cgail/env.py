@@ -111,8 +111,16 @@ class CgailEnv:
         self.state_dim = state_dim(tracking or self.phase_obs)
         self.obs_dim = self.state_dim
         self._init_env_state()
-        self.own_starts = (  # env.own_start_weight: restart states of the policy's own (numpy only)
-            OwnStarts(int(env_cfg.own_start_capacity), self.rsi_qpos.shape[-1], self.rsi_qvel.shape[-1])
+        self.own_starts = (  # env.own_start_weight: restart states of the policy's own
+            OwnStarts(
+                int(env_cfg.own_start_capacity),
+                self.rsi_qpos.shape[-1],
+                self.rsi_qvel.shape[-1],
+                self.K,
+                a.zeros,
+                self.rsi_qpos.dtype,
+                a.index_dtype,
+            )
             if env_cfg.own_start_weight > 0
             else None
         )
@@ -231,12 +239,16 @@ class CgailEnv:
         skill, frames, yaw, goal_offset = draws
         qpos = self.rsi_qpos[skill, frames]  # advanced indexing: copies
         qvel = self.rsi_qvel[skill, frames]
+        R = rotations_for(qpos)
+        xp = namespace(qpos)
         grace = 0
         if self.own_starts is not None and self.start_frame is None:  # a forced frame (evaluation) starts there
-            own, slots = self.own_starts.draw(self.arrays.rng, skill, self.cfg.own_start_weight)
-            qpos[own], qvel[own], frames[own] = self.own_starts.qpos[slots], self.own_starts.qvel[slots], 0
-            grace = np.where(own, self.pose_grace, 0)  # as a restart at frame 0 has
-        R = rotations_for(qpos)
+            u_own, u_slot = self.arrays.uniform(rows), self.arrays.uniform(rows)
+            own, slots = self.own_starts.draw(skill, u_own, u_slot, self.cfg.own_start_weight)
+            qpos = xp.where(own[:, None], self.own_starts.qpos[slots], qpos)
+            qvel = xp.where(own[:, None], self.own_starts.qvel[slots], qvel)
+            frames = xp.where(own, xp.zeros_like(frames), frames)
+            grace = xp.where(own, xp.full_like(frames, self.pose_grace), xp.zeros_like(frames))  # as a restart has
         turn = R.heading_quat(yaw)
         qpos[:, 0] = 0.0
         qpos[:, 2] = 0.0
@@ -398,8 +410,7 @@ class CgailEnv:
         """env.own_start_weight: keep the physics states of the envs whose timed reference restarted at frame 0 this
         step (`own_starts.restarted_here`), except those that ended and skills with a heading goal."""
         fresh = restarted_here(self.ref_grace, self.ref_active, self.pose_grace) & ~done & ~self.has_goal[self.cmd]
-        ids = np.flatnonzero(fresh)
-        self.own_starts.keep(self.sim.qpos[ids], self.sim.qvel[ids], self.cmd[ids])
+        self.own_starts.keep(self.sim.qpos, self.sim.qvel, self.cmd, fresh)
 
     def _maybe_switch(self, mask) -> None:
         """Switch each env in `mask` to a random command with probability env.switch_prob."""
