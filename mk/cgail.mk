@@ -25,7 +25,8 @@ CGAIL_DEMO_SCHEDULE := walk:0,run:4,right_kick:8
 
 .PHONY: repro-cgail-small repro-cgail-current repro-cgail-paper demo-cgail
 
-# The fidelity recipe's 3-skill runs (docs/cgail.md, "Fidelity recipe"): A = per-skill style head, wrong-skill
+# The fidelity recipe's 3-skill runs (docs/cgail.md, "Fidelity recipe"), trained before the small preset carried the
+# recipe, so their targets start from the paper's keys ($(CGAIL_PAPER_RECIPE)) and set each run's own: A = per-skill style head, wrong-skill
 # fakes, class head on demonstrations only (w_S 0.8, w_C 0.2, r_C = P(command)), KL-targeting PPO rate; B = A's
 # run forked at its 5,005,312-sample checkpoint and continued with early termination on a low style reward to
 # 23,724,032 samples; C = B continued with early termination on a large pose error (0.5 m) to 4e7 samples;
@@ -36,7 +37,7 @@ CGAIL_FID_SAMPLES ?= 40000000
 
 .PHONY: repro-cgail-fidelity
 repro-cgail-fidelity: install ## cgail: the fidelity recipe's runs A to E (3 skills, 8e7 samples; ~7 h on 2 cores) = pretrained/cgail-3skill-fidelity, with its evaluations
-	$(CHARCTL) train cgail scale=small $(CGAIL_FID_RECIPE) train.total_samples=5005312 output_root=$(CGAIL_FID)/A
+	$(CHARCTL) train cgail scale=small $(CGAIL_PAPER_RECIPE) $(CGAIL_FID_RECIPE) train.total_samples=5005312 output_root=$(CGAIL_FID)/A
 	A=$$(ls -d $(CGAIL_FID)/A/cgail/*/ | tail -1); B=$(CGAIL_FID)/B/cgail/$$(basename $$A); \
 	mkdir -p $$B/checkpoints && cp $$A/config.yaml $$B/ && cp $$A/checkpoints/last.pt $$B/checkpoints/last.pt && \
 	$(CHARCTL) train cgail --resume $$A train.total_samples=7500000 && \
@@ -56,7 +57,7 @@ CGAIL_FID_FULL := $(CGAIL_FID_RECIPE) reward.low_style_threshold=0.05 reward.low
 
 .PHONY: repro-cgail-fidelity-one-run repro-cgail-10skill-fidelity
 repro-cgail-fidelity-one-run: install ## cgail: the fidelity recipe from scratch in one run (3 skills, 4e7 samples; ~1.9 h on 2 cores), every kept checkpoint evaluated, the chosen one evaluated in full
-	$(CHARCTL) train cgail scale=small $(CGAIL_FID_FULL) train.total_samples=$(CGAIL_FID_SAMPLES) output_root=$(CGAIL_FID)/G
+	$(CHARCTL) train cgail scale=small $(CGAIL_PAPER_RECIPE) $(CGAIL_FID_FULL) train.total_samples=$(CGAIL_FID_SAMPLES) output_root=$(CGAIL_FID)/G
 	G=$$(ls -d $(CGAIL_FID)/G/cgail/*/ | tail -1); \
 	$(CHARCTL) eval $$G --checkpoints --after 10000000 -k 32 && \
 	$(CHARCTL) eval $$G --fidelity -k 4 && $(CHARCTL) eval $$G --survival 5 -k 32 && $(CHARCTL) eval $$G --dtw --confusion --switch walk right_kick -k 8
@@ -64,13 +65,13 @@ repro-cgail-fidelity-one-run: install ## cgail: the fidelity recipe from scratch
 # Run H (docs/cgail.md, "Run H"): run G's command plus the clip phase in the policy state (env.phase_obs=true).
 .PHONY: repro-cgail-fidelity-phase
 repro-cgail-fidelity-phase: install ## cgail: run G plus the clip phase in the policy state (3 skills, 4e7 samples; ~1.9 h on 2 cores), evaluated
-	$(CHARCTL) train cgail scale=small $(CGAIL_FID_FULL) env.phase_obs=true train.total_samples=$(CGAIL_FID_SAMPLES) output_root=$(CGAIL_FID)/H
+	$(CHARCTL) train cgail scale=small $(CGAIL_PAPER_RECIPE) $(CGAIL_FID_FULL) env.phase_obs=true train.total_samples=$(CGAIL_FID_SAMPLES) output_root=$(CGAIL_FID)/H
 	H=$$(ls -d $(CGAIL_FID)/H/cgail/*/ | tail -1); \
 	$(CHARCTL) eval $$H --checkpoints --after 10000000 -k 32 && \
 	$(CHARCTL) eval $$H --fidelity -k 4 && $(CHARCTL) eval $$H --survival 5 -k 32 && $(CHARCTL) eval $$H --dtw --confusion --switch walk right_kick -k 8
 
 repro-cgail-10skill-fidelity: install ## cgail: run H's recipe (G's plus the clip phase) on all ten skills (1.5e8 samples, the paper's budget; ~6 h on 2 cores, resumable with --resume), every kept checkpoint evaluated
-	$(CHARCTL) train cgail scale=small "use_skills=[]" $(CGAIL_FID_FULL) env.phase_obs=true train.fidelity_every=2000000 train.total_samples=150000000 output_root=$(CGAIL_FID)/ten
+	$(CHARCTL) train cgail scale=small "use_skills=[]" $(CGAIL_PAPER_RECIPE) $(CGAIL_FID_FULL) env.phase_obs=true train.fidelity_every=2000000 train.total_samples=150000000 output_root=$(CGAIL_FID)/ten
 	T=$$(ls -d $(CGAIL_FID)/ten/cgail/*/ | tail -1); \
 	$(CHARCTL) eval $$T --checkpoints --after 50000000 -k 16 && $(CHARCTL) eval $$T --fidelity -k 4
 
@@ -79,7 +80,7 @@ repro-cgail-10skill-fidelity: install ## cgail: run H's recipe (G's plus the cli
 # tests/test_gpu_path.py trains the recipe's env rules on Warp-CPU at smoke scale.
 .PHONY: repro-cgail-10skill-fidelity-gpu
 repro-cgail-10skill-fidelity-gpu: install ## cgail: repro-cgail-10skill-fidelity on a CUDA GPU (env.backend=warp, 4,096 envs), every kept checkpoint evaluated
-	$(CHARCTL) train cgail scale=small "use_skills=[]" $(CGAIL_FID_FULL) env.phase_obs=true env.backend=warp device=cuda env.num_envs=4096 train.fidelity_every=5000000 train.total_samples=150000000 output_root=$(CGAIL_FID)/ten-gpu
+	$(CHARCTL) train cgail scale=small "use_skills=[]" $(CGAIL_PAPER_RECIPE) $(CGAIL_FID_FULL) env.phase_obs=true env.backend=warp device=cuda env.num_envs=4096 train.fidelity_every=5000000 train.total_samples=150000000 output_root=$(CGAIL_FID)/ten-gpu
 	T=$$(ls -d $(CGAIL_FID)/ten-gpu/cgail/*/ | tail -1); \
 	$(CHARCTL) eval $$T --checkpoints --after 50000000 -k 16 device=cpu && $(CHARCTL) eval $$T --fidelity -k 4 device=cpu
 

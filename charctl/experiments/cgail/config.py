@@ -253,12 +253,14 @@ class Config(BaseConfig):
         baselines as they are: the AMP baseline (cgail.conditional=false) has no command to pick a style logit
         for, so no per-skill head and no wrong-skill fakes; the tracking baseline (reward.kind=tracking) has no
         discriminator and its episodes end on a fall or at the clip's end only (docs/cgail.md, "Tracking
-        baseline"), so no low-style or pose-error termination and no extra tracking reward."""
+        baseline"), so no low-style or pose-error termination, no extra tracking reward and no starts from its own
+        restart states (its clip runs on without restarting)."""
         keys = []
         if not cfg.cgail.conditional:
             keys += ["disc.style_head", "disc.wrong_skill_fakes"]
         if cfg.reward.kind == "tracking":
             keys += [
+                "env.own_start_weight",
                 "reward.low_style_threshold",
                 "reward.pose_error_threshold",
                 "reward.root_height_threshold",
