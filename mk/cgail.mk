@@ -176,6 +176,15 @@ repro-cgail-3skill-own-starts-window-seed2: install ## cgail: the own-starts run
 	$(CHARCTL) train cgail --resume $$P reward.goal_reference_window=3 && \
 	$(CHARCTL) eval $$P --fidelity -k 4 && $(CHARCTL) eval $$P --survival 5 -k 32 && $(CHARCTL) eval $$P --dtw --confusion --switch walk right_kick -k 8
 
+# Own starts and the moving walk reference from the first sample (docs/cgail.md, "Own starts and the moving walk
+# reference from scratch"), at seed CGAIL_SEED (run at 1 and 2 on 2026-12-06).
+CGAIL_SEED ?= 1
+.PHONY: repro-cgail-3skill-own-window
+repro-cgail-3skill-own-window: install ## cgail: run H's command with env.own_start_weight=0.25 reward.goal_reference_window=3 from scratch at seed CGAIL_SEED (default 1; 4e7 samples, ~75 min on 2 cores), evaluated
+	$(CHARCTL) train cgail env.own_start_weight=0.25 reward.goal_reference_window=3 train.total_samples=$(CGAIL_FID_SAMPLES) train.checkpoint_every=20 train.keep_checkpoint_every=2500000 seed=$(CGAIL_SEED) output_root=$(CGAIL_FID)/own-window-seed$(CGAIL_SEED)
+	O=$$(ls -d $(CGAIL_FID)/own-window-seed$(CGAIL_SEED)/cgail/*/ | tail -1); \
+	$(CHARCTL) eval $$O --fidelity -k 4 && $(CHARCTL) eval $$O --survival 5 -k 32 && $(CHARCTL) eval $$O --dtw --confusion --switch walk right_kick -k 8
+
 .PHONY: repro-cgail-10skill-track4
 repro-cgail-10skill-track4: install ## cgail: the window run's ten-skill command with reward.w_track=4.0 (1.5e8 samples; ~5 h on 2 cores, resumable), evaluated
 	$(CHARCTL) train cgail "use_skills=[]" reward.w_track=4.0 reward.root_height_threshold=0.15 reward.yaw_error_threshold=1.5 reward.goal_reference_window=3 train.fidelity_every=2000000 train.total_samples=150000000 train.checkpoint_every=20 train.keep_checkpoint_every=2500000 seed=1 output_root=$(CGAIL_FID)/track4-10skill
