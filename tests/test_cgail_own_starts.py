@@ -128,6 +128,19 @@ def test_the_torch_env_keeps_and_starts_from_the_same_states(kick, compact):
     assert env.ref_frame.tolist() == [0, 0] and env.ref_grace.tolist() == [3, 3]
 
 
+def test_by_success_scales_each_skills_share_by_its_success_rate(kick):
+    """env.own_start_by_success: weight 0.8 and a kick failure rate of 0.75 give a share of 0.8 x 0.25 = 0.2, so a
+    start with u_own 0.1 takes a kept state and one with 0.3 starts from the clip (weight alone: both would)."""
+    env = _env(kick, weight=0.8)
+    env.cfg.own_start_by_success = True
+    env.own_starts.keep(env.rsi_qpos[0, 20][None], env.rsi_qvel[0, 20][None], np.array([0]), np.array([True]))
+    env.fall_rate = np.array([0.75])
+    draws = iter([np.array([0.1, 0.3]), np.array([0.5, 0.5])])  # u_own, then u_slot
+    env.arrays.uniform = lambda rows: next(draws)
+    env.reset(np.arange(2))
+    assert env.ref_frame[0] == 0 and env.ref_grace.tolist() == [3, 0]
+
+
 def test_the_starts_are_off_in_evaluation_envs_and_need_a_restarting_reference():
     from charctl.config import compose_config
     from charctl.errors import CharctlError
@@ -142,6 +155,8 @@ def test_the_starts_are_off_in_evaluation_envs_and_need_a_restarting_reference()
     tr.cfg.env.own_start_weight = 0.5
     assert tr.make_env(2).own_starts is None and _make_env(tr.agent, 2, 0, 1.0).own_starts is None
     assert tr.make_env(2, rules=env_rules(tr.cfg.reward)).own_starts is not None  # a diagnostic of the training rules
+    with pytest.raises(CharctlError, match="set env.own_start_weight > 0 with it"):
+        compose_config("cgail", ["scale=smoke", "env.own_start_by_success=true"], Config)
     with pytest.raises(CharctlError, match="restarts at frame 0"):
         overrides = ["reward.pose_error_threshold=0", "env.phase_obs=false"]
         compose_config("cgail", ["scale=smoke", "env.own_start_weight=0.5", *overrides], Config)

@@ -86,6 +86,12 @@ class EnvConfig:
     # heading goal only (a heading goal's reference is the closest frame). 0 = RSI only (the paper). Every backend.
     own_start_weight: float = ranged(0.0, ge=0, le=1)
     own_start_capacity: int = ranged(4096, ge=1)  # restart states kept, the newest replacing the oldest
+    # true = each skill's share of own starts is own_start_weight x (1 - its recent failure rate, as fall_rate/<skill>):
+    # while a skill fails from the clip's own frames, its starts stay RSI. Until a kick completes a pass the ring holds
+    # only command-ramp ends (a walk pose, the kick at frame 0), and with the full share from the first sample the
+    # seed-1 kick came 2e7 samples late (docs/cgail.md, "Own starts and the moving walk reference from scratch").
+    # Added 2026-12-06, not yet trained with.
+    own_start_by_success: bool = False
     action_scale: float = ranged(1.0, gt=0)  # PD target (rad) = rest pose + action_scale * action
     fall_tolerance: float = ranged(0.005, ge=0)  # m: a non-foot body this close to the ground ends the episode (a fall)
     goal_max_angle_deg: float = 45.0  # new heading goals lie within +- this angle of the current heading
@@ -381,6 +387,8 @@ def _check_env(cfg) -> str | None:
             "env.start_failure_weight needs a timed reference to place failures in the clip: env.phase_obs=true, "
             "reward.pose_error_threshold > 0 or reward.kind=tracking"
         )
+    if env.own_start_by_success and env.own_start_weight <= 0:
+        return "env.own_start_by_success scales env.own_start_weight: set env.own_start_weight > 0 with it"
     if env.own_start_weight > 0:
         r = cfg.reward
         if r.kind != "adversarial" or not (env.phase_obs or r.pose_error_threshold > 0) or r.pose_error_grace_steps < 1:

@@ -244,7 +244,10 @@ class CgailEnv:
         grace = 0
         if self.own_starts is not None and self.start_frame is None:  # a forced frame (evaluation) starts there
             u_own, u_slot = self.arrays.uniform(rows), self.arrays.uniform(rows)
-            own, slots = self.own_starts.draw(skill, u_own, u_slot, self.cfg.own_start_weight)
+            weight = self.cfg.own_start_weight
+            if self.cfg.own_start_by_success:  # the skill's share scaled by its recent success rate
+                weight = weight * (1.0 - xp.take(self.fall_rate, skill))
+            own, slots = self.own_starts.draw(skill, u_own, u_slot, weight)
             qpos = xp.where(own[:, None], self.own_starts.qpos[slots], qpos)
             qvel = xp.where(own[:, None], self.own_starts.qvel[slots], qvel)
             frames = xp.where(own, xp.zeros_like(frames), frames)

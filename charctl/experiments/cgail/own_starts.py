@@ -48,10 +48,11 @@ class OwnStarts:
         self.skill[self.capacity] = -1
         self.written = self.written + n
 
-    def draw(self, skill: Array, u_own: Array, u_slot: Array, weight: float) -> tuple[Array, Array]:
+    def draw(self, skill: Array, u_own: Array, u_slot: Array, weight: float | Array) -> tuple[Array, Array]:
         """For starts of skills (n,) `skill` with uniforms in [0, 1) (n,) `u_own`, `u_slot`: ((n,) bool which
         start from a kept state, (n,) their ring slots, meaningful where the first is set). A start takes a kept
-        state of its own skill with probability `weight` where the ring holds one, each of them equally likely:
+        state of its own skill with probability `weight` (one for all, or (n,) per start) where the ring holds
+        one, each of them equally likely:
         the `floor(u_slot * count)`-th kept state of that skill in slot order."""
         xp = namespace(skill)
         K = self.num_skills
