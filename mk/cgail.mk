@@ -185,6 +185,14 @@ repro-cgail-3skill-own-window: install ## cgail: run H's command with env.own_st
 	O=$$(ls -d $(CGAIL_FID)/own-window-seed$(CGAIL_SEED)/cgail/*/ | tail -1); \
 	$(CHARCTL) eval $$O --fidelity -k 4 && $(CHARCTL) eval $$O --survival 5 -k 32 && $(CHARCTL) eval $$O --dtw --confusion --switch walk right_kick -k 8
 
+# The same with each skill's own-start share scaled by its success rate (env.own_start_by_success; started at seed 1
+# on 2026-12-06 against the kick's late start above).
+.PHONY: repro-cgail-3skill-own-window-gated
+repro-cgail-3skill-own-window-gated: install ## cgail: repro-cgail-3skill-own-window with env.own_start_by_success=true at seed CGAIL_SEED (4e7 samples, ~80 min on 2 cores), evaluated
+	$(CHARCTL) train cgail env.own_start_weight=0.25 env.own_start_by_success=true reward.goal_reference_window=3 train.total_samples=$(CGAIL_FID_SAMPLES) train.checkpoint_every=20 train.keep_checkpoint_every=2500000 seed=$(CGAIL_SEED) output_root=$(CGAIL_FID)/own-window-gated-seed$(CGAIL_SEED)
+	O=$$(ls -d $(CGAIL_FID)/own-window-gated-seed$(CGAIL_SEED)/cgail/*/ | tail -1); \
+	$(CHARCTL) eval $$O --fidelity -k 4 && $(CHARCTL) eval $$O --survival 5 -k 32 && $(CHARCTL) eval $$O --dtw --confusion --switch walk right_kick -k 8
+
 .PHONY: repro-cgail-10skill-track4
 repro-cgail-10skill-track4: install ## cgail: the window run's ten-skill command with reward.w_track=4.0 (1.5e8 samples; ~5 h on 2 cores, resumable), evaluated
 	$(CHARCTL) train cgail "use_skills=[]" reward.w_track=4.0 reward.root_height_threshold=0.15 reward.yaw_error_threshold=1.5 reward.goal_reference_window=3 train.fidelity_every=2000000 train.total_samples=150000000 train.checkpoint_every=20 train.keep_checkpoint_every=2500000 seed=1 output_root=$(CGAIL_FID)/track4-10skill
