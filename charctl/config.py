@@ -39,6 +39,18 @@ class BaseConfig:
     device: str = "auto"  # auto | cpu | cuda (auto: cuda when available)
     notes: str = ""  # free text stored with the run
 
+    @classmethod
+    def check(cls, cfg) -> str | None:
+        """The first problem of a composed config, or None: each field's declared choices and range
+        (`charctl.config_fields.check_fields`), then the experiment's cross-field rules (`cross_checks`).
+        `validate` runs the same two; this is the one call for code that builds a config without it."""
+        return check_fields(cfg, cls) or cls.cross_checks(cfg)
+
+    @staticmethod
+    def cross_checks(cfg) -> str | None:
+        """The experiment's rules between fields (each experiment's Config overrides it): a message or None."""
+        return None
+
 
 def conf_dir() -> Path:
     """The `conf/` folder (repo root next to the package, or $CHARCTL_CONF)."""
@@ -124,9 +136,9 @@ def validate(cfg, schema: type, experiment: str, given: frozenset[str] | None = 
     problem = check_fields(merged, schema) or check_device_name(merged.get("device", "auto"), schema, experiment)
     if problem:
         raise CharctlError(f"invalid config for {experiment}: {problem}")
-    check = getattr(schema, "check", None)
-    if callable(check):
-        problem = check(merged)
+    cross_checks = getattr(schema, "cross_checks", None)  # BaseConfig's subclasses
+    if callable(cross_checks):
+        problem = cross_checks(merged)
         if problem:
             raise CharctlError(f"invalid config for {experiment}: {problem}")
     return merged

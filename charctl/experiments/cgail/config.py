@@ -8,7 +8,7 @@ from dataclasses import dataclass, field
 from typing import Annotated, Literal
 
 from charctl.config import ANY_VALUE, BaseConfig, RemovedKeys
-from charctl.config_fields import check_fields, ranged
+from charctl.config_fields import ranged
 from charctl.rl.config import PPOConfig, check_ppo
 from charctl.sim import CONTROL_HZ, JOINT_ARMATURE, PHYSICS_HZ
 
@@ -278,12 +278,9 @@ class Config(BaseConfig):
         return keys
 
     @staticmethod
-    def check(cfg) -> str | None:
-        """Cross-field checks; returns a message or None. validate has checked each field's declared
-        choices and range (charctl.config_fields.check_fields) before; they are checked here again for
-        callers of check alone. The groups run in order and the first problem found is reported."""
-        if (msg := check_fields(cfg, Config)) is not None:  # declared choices and ranges (direct callers too)
-            return msg
+    def cross_checks(cfg) -> str | None:
+        """Cross-field checks; returns a message or None.
+        `BaseConfig.check` runs them after each field's declared choices and range."""
         for group in (_check_skills, _check_rewards, _check_disc, _check_env, _check_train):
             if (msg := group(cfg)) is not None:
                 return msg

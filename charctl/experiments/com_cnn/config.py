@@ -9,7 +9,7 @@ from dataclasses import dataclass, field
 from typing import Annotated, Literal
 
 from charctl.config import BaseConfig
-from charctl.config_fields import check_fields, ranged
+from charctl.config_fields import ranged
 
 # Table 1 of the paper: mass per body part (total 62). Units are the paper's (only ratios matter).
 PAPER_MASS_TABLE = {
@@ -188,12 +188,9 @@ class Config(BaseConfig):
     generate: GenerateConfig = field(default_factory=GenerateConfig)
 
     @staticmethod
-    def check(cfg) -> str | None:
-        """Cross-key checks; a string describes the first problem. validate has checked each field's declared
-        choices and range (charctl.config_fields.check_fields) before; they are checked here again for callers
-        of check alone."""
-        if (msg := check_fields(cfg, Config)) is not None:  # declared choices and ranges (direct callers too)
-            return msg
+    def cross_checks(cfg) -> str | None:
+        """Cross-key checks; a string describes the first problem.
+        `BaseConfig.check` runs them after each field's declared choices and range."""
         if not cfg.model.channels:
             return "model.channels must be non-empty (one entry per conv layer)"
         if conv_output_length(cfg.data.history, cfg.model.kernel, cfg.model.pool, len(cfg.model.channels)) < 1:

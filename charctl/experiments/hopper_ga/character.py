@@ -58,7 +58,7 @@ def body_from_config(char) -> Body:
     names = tuple(s.name for s in upper)
     parent = np.array([-1 if s.parent == "root" else names.index(s.parent) for s in upper], dtype=int)
     depth = np.zeros(len(upper), dtype=int)
-    for j, p in enumerate(parent):  # parents precede children (checked by Config.check); setup only
+    for j, p in enumerate(parent):  # parents precede children (checked by Config.cross_checks); setup only
         depth[j] = 0 if p < 0 else depth[p] + 1
     levels = tuple(np.flatnonzero(depth == d) for d in range(int(depth.max()) + 1)) if len(upper) else ()
     direction = np.array([s.direction for s in upper], dtype=float).reshape(-1, 3)

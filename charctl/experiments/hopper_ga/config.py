@@ -9,7 +9,7 @@ from dataclasses import dataclass, field
 from typing import Annotated, Literal
 
 from charctl.config import BaseConfig
-from charctl.config_fields import check_fields, ranged
+from charctl.config_fields import ranged
 
 
 @dataclass
@@ -174,12 +174,9 @@ class Config(BaseConfig):
     export: ExportConfig = field(default_factory=ExportConfig)
 
     @staticmethod
-    def check(cfg) -> str | None:
-        """Cross-field checks; returns a message or None. validate has checked each field's declared choices
-        and range (charctl.config_fields.check_fields) before; they are checked here again for callers of
-        check alone."""
-        if (msg := check_fields(cfg, Config)) is not None:  # declared choices and ranges (direct callers too)
-            return msg
+    def cross_checks(cfg) -> str | None:
+        """Cross-field checks; returns a message or None.
+        `BaseConfig.check` runs them after each field's declared choices and range."""
         for part in (_check_bounds, _check_ga, _check_character):
             if (msg := part(cfg)) is not None:
                 return msg

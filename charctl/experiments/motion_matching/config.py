@@ -11,7 +11,7 @@ from dataclasses import dataclass, field
 from typing import Annotated, Literal
 
 from charctl.config import BaseConfig
-from charctl.config_fields import check_fields, ranged
+from charctl.config_fields import ranged
 from charctl.errors import CharctlError
 
 NAME = "motion-matching"
@@ -135,12 +135,9 @@ class Config(BaseConfig):
     sweep: SweepConfig = field(default_factory=SweepConfig)
 
     @staticmethod
-    def check(cfg) -> str | None:
-        """A one-line problem with the config, or None: the cross-field rules. validate has checked each
-        field's declared choices and range (charctl.config_fields.check_fields) before; they are checked here
-        again for callers of check alone."""
-        if (msg := check_fields(cfg, Config)) is not None:  # declared choices and ranges (direct callers too)
-            return msg
+    def cross_checks(cfg) -> str | None:
+        """A one-line problem with the config, or None: the cross-field rules.
+        `BaseConfig.check` runs them after each field's declared choices and range."""
         f, p = cfg.features, cfg.paths
         if f.position_weight + f.velocity_weight + f.direction_weight <= 0:
             return "at least one of features.position_weight/velocity_weight/direction_weight must be > 0"

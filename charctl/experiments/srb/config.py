@@ -11,7 +11,7 @@ from dataclasses import dataclass, field
 from typing import Annotated, Literal
 
 from charctl.config import BaseConfig
-from charctl.config_fields import check_fields, ranged
+from charctl.config_fields import ranged
 from charctl.rl.config import PPOConfig, check_ppo
 
 
@@ -173,10 +173,7 @@ class Config(BaseConfig):
     push: PushConfig = field(default_factory=PushConfig)
 
     @staticmethod
-    def check(cfg) -> str | None:
-        """Cross-field checks (called by charctl.config.validate); a message or None. validate has checked each
-        field's declared choices and range (charctl.config_fields.check_fields) before; they are checked here
-        again for callers of check alone."""
-        if (msg := check_fields(cfg, Config)) is not None:  # declared choices and ranges (direct callers too)
-            return msg
+    def cross_checks(cfg) -> str | None:
+        """Cross-field checks (called by charctl.config.validate); a message or None.
+        `BaseConfig.check` runs them after each field's declared choices and range."""
         return check_ppo(cfg.ppo)
