@@ -135,6 +135,7 @@ def test_by_success_scales_each_skills_share_by_its_success_rate(kick):
     env.cfg.own_start_by_success = True
     env.own_starts.keep(env.rsi_qpos[0, 20][None], env.rsi_qvel[0, 20][None], np.array([0]), np.array([True]))
     env.fall_rate = np.array([0.75])
+    assert env.own_start_shares().tolist() == [0.2]
     draws = iter([np.array([0.1, 0.3]), np.array([0.5, 0.5])])  # u_own, then u_slot
     env.arrays.uniform = lambda rows: next(draws)
     env.reset(np.arange(2))
@@ -165,8 +166,14 @@ def test_the_starts_are_off_in_evaluation_envs_and_need_a_restarting_reference()
 
 
 def test_smoke_training_with_own_starts(tmp_path, charctl_main):
-    res = charctl_main(
-        "train", "cgail", "scale=smoke", "env.own_start_weight=0.5", "env.phase_obs=true", f"output_root={tmp_path}"
-    )
+    """Each skill's share is logged (own_start_share/<skill>): with the gate, weight x (1 - failure rate), below
+    the weight (0.5) while the rate is above 0 (it starts at 0.5 and moves by an average: never exactly 0)."""
+    from charctl.eval.tb import read_scalars
+
+    overrides = ["env.own_start_weight=0.5", "env.own_start_by_success=true", "env.phase_obs=true"]
+    res = charctl_main("train", "cgail", "scale=smoke", *overrides, f"output_root={tmp_path}")
     assert res.returncode == 0, res.stderr
     assert "done: iterations=4" in res.stdout
+    (run,) = (tmp_path / "cgail").iterdir()
+    shares = {k: v for k, (_, v) in read_scalars(run / "tb").items() if k.startswith("own_start_share/")}
+    assert len(shares) == 2 and all(((v > 0) & (v < 0.5)).all() for v in shares.values()), shares

@@ -244,10 +244,7 @@ class CgailEnv:
         grace = 0
         if self.own_starts is not None and self.start_frame is None:  # a forced frame (evaluation) starts there
             u_own, u_slot = self.arrays.uniform(rows), self.arrays.uniform(rows)
-            weight = self.cfg.own_start_weight
-            if self.cfg.own_start_by_success:  # the skill's share scaled by its recent success rate
-                weight = weight * (1.0 - xp.take(self.fall_rate, skill))
-            own, slots = self.own_starts.draw(skill, u_own, u_slot, weight)
+            own, slots = self.own_starts.draw(skill, u_own, u_slot, xp.take(self.own_start_shares(), skill))
             qpos = xp.where(own[:, None], self.own_starts.qpos[slots], qpos)
             qvel = xp.where(own[:, None], self.own_starts.qvel[slots], qvel)
             frames = xp.where(own, xp.zeros_like(frames), frames)
@@ -408,6 +405,13 @@ class CgailEnv:
             pose_ended,
             scored,
         )
+
+    def own_start_shares(self):
+        """(K,) each skill's probability of a start from the ring where it holds a state of that skill:
+        env.own_start_weight, times the skill's recent success rate (1 - its failure rate, `fall_rate/<skill>`)
+        with env.own_start_by_success (logged as own_start_share/<skill>)."""
+        success = 1.0 - self.fall_rate if self.cfg.own_start_by_success else self.fall_rate * 0.0 + 1.0
+        return self.cfg.own_start_weight * success
 
     def _keep_own_starts(self, done) -> None:
         """env.own_start_weight: keep the physics states of the envs whose timed reference restarted at frame 0 this

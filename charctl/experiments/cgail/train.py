@@ -228,8 +228,10 @@ class CgailLearner(AgentCounters):
             "train/unstable_rate": float(ro.unstable) / n,
             "sim/unstable_resets": float(ro.unstable),
         }
-        if env.own_starts is not None:  # env.own_start_weight: restart states kept so far
+        if env.own_starts is not None:  # env.own_start_weight: restart states kept so far, each skill's share
             stats["train/own_start_states"] = float(env.own_starts.written)
+            shares = env.own_start_shares().tolist()
+            stats.update({f"own_start_share/{sk.name}": float(w) for sk, w in zip(agent.skills, shares)})
         if agent.conditional:  # both envs keep per-skill failure rates (env.skill_fall_weight)
             stats.update({f"fall_rate/{sk.name}": float(r) for sk, r in zip(agent.skills, env.fall_rate.tolist())})
             stats["train/r_class"] = float(rew["r_class"].mean())
