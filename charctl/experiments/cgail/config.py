@@ -90,7 +90,7 @@ class EnvConfig:
     # while a skill fails from the clip's own frames, its starts stay RSI. Until a kick completes a pass the ring holds
     # only command-ramp ends (a walk pose, the kick at frame 0), and with the full share from the first sample the
     # seed-1 kick came 2e7 samples late (docs/cgail.md, "Own starts and the moving walk reference from scratch").
-    # Added 2026-12-06, not yet trained with.
+    # Added 2026-12-06: one run at seed 1 so far, the kick back on time at 2e7 samples (same section).
     own_start_by_success: bool = False
     action_scale: float = ranged(1.0, gt=0)  # PD target (rad) = rest pose + action_scale * action
     fall_tolerance: float = ranged(0.005, ge=0)  # m: a non-foot body this close to the ground ends the episode (a fall)
