@@ -410,7 +410,8 @@ class CgailEnv:
         """(K,) each skill's probability of a start from the ring where it holds a state of that skill:
         env.own_start_weight, times the skill's recent success rate (1 - its failure rate, `fall_rate/<skill>`)
         with env.own_start_by_success (logged as own_start_share/<skill>)."""
-        success = 1.0 - self.fall_rate if self.cfg.own_start_by_success else self.fall_rate * 0.0 + 1.0
+        xp = namespace(self.fall_rate)
+        success = 1.0 - self.fall_rate if self.cfg.own_start_by_success else xp.ones_like(self.fall_rate)
         return self.cfg.own_start_weight * success
 
     def _keep_own_starts(self, done) -> None:
