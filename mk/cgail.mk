@@ -185,12 +185,22 @@ repro-cgail-3skill-own-window: install ## cgail: run H's command with env.own_st
 	O=$$(ls -d $(CGAIL_FID)/own-window-seed$(CGAIL_SEED)/cgail/*/ | tail -1); \
 	$(CHARCTL) eval $$O --fidelity -k 4 && $(CHARCTL) eval $$O --survival 5 -k 32 && $(CHARCTL) eval $$O --dtw --confusion --switch walk right_kick -k 8
 
-# The same with each skill's own-start share scaled by its success rate (env.own_start_by_success; started at seed 1
-# on 2026-12-06 against the kick's late start above).
+# The same with each skill's own-start share scaled by its success rate (env.own_start_by_success; run at seeds 1 and 2
+# on 2026-12-06 against the kick's late start above: seed 1 met the 3-skill targets but the flight, seed 2's kick fell
+# after one pass).
 .PHONY: repro-cgail-3skill-own-window-gated
 repro-cgail-3skill-own-window-gated: install ## cgail: repro-cgail-3skill-own-window with env.own_start_by_success=true at seed CGAIL_SEED (4e7 samples, ~80 min on 2 cores), evaluated
 	$(CHARCTL) train cgail env.own_start_weight=0.25 env.own_start_by_success=true reward.goal_reference_window=3 train.total_samples=$(CGAIL_FID_SAMPLES) train.checkpoint_every=20 train.keep_checkpoint_every=2500000 seed=$(CGAIL_SEED) output_root=$(CGAIL_FID)/own-window-gated-seed$(CGAIL_SEED)
 	O=$$(ls -d $(CGAIL_FID)/own-window-gated-seed$(CGAIL_SEED)/cgail/*/ | tail -1); \
+	$(CHARCTL) eval $$O --fidelity -k 4 && $(CHARCTL) eval $$O --survival 5 -k 32 && $(CHARCTL) eval $$O --dtw --confusion --switch walk right_kick -k 8
+
+# The gate with a floor (env.own_start_floor=0.4: a failing skill keeps 0.25 x 0.4 = 0.1 of its starts from its own
+# states), against seed 2's trap under the plain gate (docs/cgail.md, "Own starts gated by success, at 4e7 samples,
+# seeds 1 and 2"); started at seed 2 on 2026-12-06.
+.PHONY: repro-cgail-3skill-own-window-floor
+repro-cgail-3skill-own-window-floor: install ## cgail: repro-cgail-3skill-own-window-gated with env.own_start_floor=0.4 at seed CGAIL_SEED (4e7 samples, ~80 min on 2 cores), evaluated
+	$(CHARCTL) train cgail env.own_start_weight=0.25 env.own_start_by_success=true env.own_start_floor=0.4 reward.goal_reference_window=3 train.total_samples=$(CGAIL_FID_SAMPLES) train.checkpoint_every=20 train.keep_checkpoint_every=2500000 seed=$(CGAIL_SEED) output_root=$(CGAIL_FID)/own-window-floor-seed$(CGAIL_SEED)
+	O=$$(ls -d $(CGAIL_FID)/own-window-floor-seed$(CGAIL_SEED)/cgail/*/ | tail -1); \
 	$(CHARCTL) eval $$O --fidelity -k 4 && $(CHARCTL) eval $$O --survival 5 -k 32 && $(CHARCTL) eval $$O --dtw --confusion --switch walk right_kick -k 8
 
 .PHONY: repro-cgail-10skill-track4

@@ -142,6 +142,19 @@ def test_by_success_scales_each_skills_share_by_its_success_rate(kick):
     assert env.ref_frame[0] == 0 and env.ref_grace.tolist() == [3, 0]
 
 
+def test_a_floor_bounds_the_success_factor_from_below(kick):
+    """env.own_start_floor 0.5 with weight 0.8: a failure rate of 0.75 gives 0.8 x max(0.5, 0.25) = 0.4 (the gate
+    alone: 0.2), one of 0.25 gives 0.8 x 0.75 = 0.6 (the floor not reached); on the torch env too."""
+    env = _env(kick, weight=0.8)
+    env.cfg.own_start_by_success, env.cfg.own_start_floor = True, 0.5
+    env.fall_rate = np.array([0.75])
+    assert env.own_start_shares().tolist() == pytest.approx([0.4])
+    env.fall_rate = np.array([0.25])
+    assert env.own_start_shares().tolist() == pytest.approx([0.6])
+    env.fall_rate = torch.tensor([0.75, 0.25], dtype=torch.float64)  # the torch env's fall_rate
+    assert env.own_start_shares().tolist() == pytest.approx([0.4, 0.6])
+
+
 def test_the_starts_are_off_in_evaluation_envs_and_need_a_restarting_reference():
     from charctl.config import compose_config
     from charctl.errors import CharctlError
@@ -158,6 +171,9 @@ def test_the_starts_are_off_in_evaluation_envs_and_need_a_restarting_reference()
     assert tr.make_env(2, rules=env_rules(tr.cfg.reward)).own_starts is not None  # a diagnostic of the training rules
     with pytest.raises(CharctlError, match="set env.own_start_weight > 0 with it"):
         compose_config("cgail", ["scale=smoke", "env.own_start_by_success=true"], Config)
+    with pytest.raises(CharctlError, match="set env.own_start_by_success=true with it"):
+        floor = ["env.own_start_weight=0.5", "env.phase_obs=true", "env.own_start_floor=0.4"]
+        compose_config("cgail", ["scale=smoke", *floor], Config)
     with pytest.raises(CharctlError, match="restarts at frame 0"):
         overrides = ["reward.pose_error_threshold=0", "env.phase_obs=false"]
         compose_config("cgail", ["scale=smoke", "env.own_start_weight=0.5", *overrides], Config)

@@ -90,8 +90,15 @@ class EnvConfig:
     # while a skill fails from the clip's own frames, its starts stay RSI. Until a kick completes a pass the ring holds
     # only command-ramp ends (a walk pose, the kick at frame 0), and with the full share from the first sample the
     # seed-1 kick came 2e7 samples late (docs/cgail.md, "Own starts and the moving walk reference from scratch").
-    # Added 2026-12-06: one run at seed 1 so far, the kick back on time at 2e7 samples (same section).
+    # Added 2026-12-06: at seed 1 the kick back on time and every 3-skill target but the flight at 4e7; at seed 2 the
+    # kick failed its second pass at 0.88 to the end, so its share stayed at 0.03 and it kicked once and fell: the
+    # starts that teach the second pass are the own starts it withheld (docs/cgail.md, "Own starts gated by success,
+    # at 4e7 samples, seeds 1 and 2"). Not in the small preset.
     own_start_by_success: bool = False
+    # with env.own_start_by_success: the success factor never falls below this, so a skill that keeps failing still
+    # gets own_start_weight x own_start_floor of its starts from its own states (the fix seed 2 asked for; added
+    # 2026-12-06, one run started at seed 2, same section). 0 = the gate as it was.
+    own_start_floor: float = ranged(0.0, ge=0, le=1)
     action_scale: float = ranged(1.0, gt=0)  # PD target (rad) = rest pose + action_scale * action
     fall_tolerance: float = ranged(0.005, ge=0)  # m: a non-foot body this close to the ground ends the episode (a fall)
     goal_max_angle_deg: float = 45.0  # new heading goals lie within +- this angle of the current heading
@@ -386,6 +393,8 @@ def _check_env(cfg) -> str | None:
         )
     if env.own_start_by_success and env.own_start_weight <= 0:
         return "env.own_start_by_success scales env.own_start_weight: set env.own_start_weight > 0 with it"
+    if env.own_start_floor > 0 and not env.own_start_by_success:
+        return "env.own_start_floor bounds env.own_start_by_success's factor: set env.own_start_by_success=true with it"
     if env.own_start_weight > 0:
         r = cfg.reward
         if r.kind != "adversarial" or not (env.phase_obs or r.pose_error_threshold > 0) or r.pose_error_grace_steps < 1:

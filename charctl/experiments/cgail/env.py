@@ -408,11 +408,11 @@ class CgailEnv:
 
     def own_start_shares(self):
         """(K,) each skill's probability of a start from the ring where it holds a state of that skill:
-        env.own_start_weight, times the skill's recent success rate (1 - its failure rate, `fall_rate/<skill>`)
-        with env.own_start_by_success (logged as own_start_share/<skill>)."""
-        xp = namespace(self.fall_rate)
-        success = 1.0 - self.fall_rate if self.cfg.own_start_by_success else xp.ones_like(self.fall_rate)
-        return self.cfg.own_start_weight * success
+        env.own_start_weight, times the skill's recent success rate (1 - its failure rate, `fall_rate/<skill>`, at
+        least env.own_start_floor) with env.own_start_by_success (logged as own_start_share/<skill>)."""
+        if not self.cfg.own_start_by_success:
+            return self.cfg.own_start_weight * namespace(self.fall_rate).ones_like(self.fall_rate)
+        return self.cfg.own_start_weight * (1.0 - self.fall_rate).clip(min=self.cfg.own_start_floor)
 
     def _keep_own_starts(self, done) -> None:
         """env.own_start_weight: keep the physics states of the envs whose timed reference restarted at frame 0 this
