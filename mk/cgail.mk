@@ -34,6 +34,8 @@ CGAIL_DEMO_SCHEDULE := walk:0,run:4,right_kick:8
 CGAIL_FID := outputs/repro/cgail-fidelity
 CGAIL_FID_RECIPE := disc.style_head=per_skill disc.wrong_skill_fakes=0.25 cgail.class_on_policy=false reward.w_style=0.8 reward.w_class=0.2 reward.class_form=prob ppo.desired_kl=0.02 ppo.lr_max=1e-4 train.checkpoint_every=20 train.keep_checkpoint_every=2500000 seed=1
 CGAIL_FID_SAMPLES ?= 40000000
+# The evaluations each 3-skill and ten-skill run below gets: $(call cgail-evaluate,RUN_DIR).
+cgail-evaluate = $(CHARCTL) eval $(1) --fidelity -k 4 && $(CHARCTL) eval $(1) --survival 5 -k 32 && $(CHARCTL) eval $(1) --dtw --confusion --switch walk right_kick -k 8
 
 .PHONY: repro-cgail-fidelity
 repro-cgail-fidelity: install ## cgail: the fidelity recipe's runs A to E (3 skills, 8e7 samples; ~7 h on 2 cores) = pretrained/cgail-3skill-fidelity, with its evaluations
@@ -49,7 +51,7 @@ repro-cgail-fidelity: install ## cgail: the fidelity recipe's runs A to E (3 ski
 	$(CHARCTL) train cgail --resume $$D reward.w_track=0.5 train.total_samples=46579712 && $(CHARCTL) eval $$D --fidelity --survival 5 -k 4 && \
 	E=$(CGAIL_FID)/E/cgail/$$(basename $$A); mkdir -p $$E/checkpoints && cp -r $$D/config.yaml $$D/tb $$E/ && cp $$D/checkpoints/last.pt $$E/checkpoints/ && \
 	$(CHARCTL) train cgail --resume $$E env.skill_fall_weight=0.5 reward.w_track=1.0 train.total_samples=80000000 && \
-	$(CHARCTL) eval $$E --fidelity -k 4 && $(CHARCTL) eval $$E --survival 5 -k 32 && $(CHARCTL) eval $$E --dtw --confusion --switch walk right_kick -k 8
+	$(call cgail-evaluate,$$E)
 
 # The whole recipe from the first sample, one run (docs/cgail.md, "Run G"): A's keys plus B's low-style termination,
 # C's pose-error termination, D/E's tracking reward (w_T 1.0) and E's fall-weighted commands.
@@ -60,7 +62,7 @@ repro-cgail-fidelity-one-run: install ## cgail: the fidelity recipe from scratch
 	$(CHARCTL) train cgail scale=small $(CGAIL_PAPER_RECIPE) $(CGAIL_FID_FULL) train.total_samples=$(CGAIL_FID_SAMPLES) output_root=$(CGAIL_FID)/G
 	G=$$(ls -d $(CGAIL_FID)/G/cgail/*/ | tail -1); \
 	$(CHARCTL) eval $$G --checkpoints --after 10000000 -k 32 && \
-	$(CHARCTL) eval $$G --fidelity -k 4 && $(CHARCTL) eval $$G --survival 5 -k 32 && $(CHARCTL) eval $$G --dtw --confusion --switch walk right_kick -k 8
+	$(call cgail-evaluate,$$G)
 
 # Run H (docs/cgail.md, "Run H"): run G's command plus the clip phase in the policy state (env.phase_obs=true).
 .PHONY: repro-cgail-fidelity-phase
@@ -68,7 +70,7 @@ repro-cgail-fidelity-phase: install ## cgail: run G plus the clip phase in the p
 	$(CHARCTL) train cgail scale=small $(CGAIL_PAPER_RECIPE) $(CGAIL_FID_FULL) env.phase_obs=true train.total_samples=$(CGAIL_FID_SAMPLES) output_root=$(CGAIL_FID)/H
 	H=$$(ls -d $(CGAIL_FID)/H/cgail/*/ | tail -1); \
 	$(CHARCTL) eval $$H --checkpoints --after 10000000 -k 32 && \
-	$(CHARCTL) eval $$H --fidelity -k 4 && $(CHARCTL) eval $$H --survival 5 -k 32 && $(CHARCTL) eval $$H --dtw --confusion --switch walk right_kick -k 8
+	$(call cgail-evaluate,$$H)
 
 repro-cgail-10skill-fidelity: install ## cgail: run H's recipe (G's plus the clip phase) on all ten skills (1.5e8 samples, the paper's budget; ~6 h on 2 cores, resumable with --resume), every kept checkpoint evaluated
 	$(CHARCTL) train cgail scale=small "use_skills=[]" $(CGAIL_PAPER_RECIPE) $(CGAIL_FID_FULL) env.phase_obs=true train.fidelity_every=2000000 train.total_samples=150000000 output_root=$(CGAIL_FID)/ten
@@ -104,7 +106,7 @@ repro-cgail-flight: install ## cgail: the recipe plus reward.root_height_thresho
 repro-cgail-10skill-window: install ## cgail: ten skills, both radii plus reward.goal_reference_window=3 (1.5e8 samples; ~5 h on 2 cores, resumable), evaluated
 	$(CHARCTL) train cgail "use_skills=[]" reward.root_height_threshold=0.15 reward.yaw_error_threshold=1.5 reward.goal_reference_window=3 train.fidelity_every=2000000 train.total_samples=150000000 train.checkpoint_every=20 train.keep_checkpoint_every=2500000 seed=1 output_root=$(CGAIL_FID)/window
 	T=$$(ls -d $(CGAIL_FID)/window/cgail/*/ | tail -1); \
-	$(CHARCTL) eval $$T --fidelity -k 4 && $(CHARCTL) eval $$T --survival 5 -k 32 && $(CHARCTL) eval $$T --dtw --confusion --switch walk right_kick -k 8
+	$(call cgail-evaluate,$$T)
 
 # Failure-weighted start frames on the finished window run (docs/cgail.md, "Spindance"): 3e7 more samples from its
 # 1.5e8 checkpoint with env.start_failure_weight=0.5 (half the starts drawn just before where episodes end). Past the
@@ -127,7 +129,7 @@ repro-cgail-10skill-start-frames: install ## cgail: the window run's 1.5e8 check
 repro-cgail-3skill-track4: install ## cgail: run H's command with reward.w_track=4.0 (4e7 samples; ~75 min on 2 cores), evaluated
 	$(CHARCTL) train cgail reward.w_track=4.0 train.total_samples=$(CGAIL_FID_SAMPLES) train.checkpoint_every=20 train.keep_checkpoint_every=2500000 seed=1 output_root=$(CGAIL_FID)/track4-3skill
 	T=$$(ls -d $(CGAIL_FID)/track4-3skill/cgail/*/ | tail -1); \
-	$(CHARCTL) eval $$T --fidelity -k 4 && $(CHARCTL) eval $$T --survival 5 -k 32 && $(CHARCTL) eval $$T --dtw --confusion --switch walk right_kick -k 8
+	$(call cgail-evaluate,$$T)
 
 # Run H's command (the small preset) at a second seed, and the same with the moving walk reference of the ten-skill
 # runs (docs/cgail.md, "Run H at a second seed").
@@ -135,12 +137,12 @@ repro-cgail-3skill-track4: install ## cgail: run H's command with reward.w_track
 repro-cgail-3skill-seed2: install ## cgail: run H's command at seed 2 (3 skills, 4e7 samples; ~70 min on 2 cores), evaluated
 	$(CHARCTL) train cgail train.total_samples=$(CGAIL_FID_SAMPLES) train.checkpoint_every=20 train.keep_checkpoint_every=2500000 seed=2 output_root=$(CGAIL_FID)/H-seed2
 	S=$$(ls -d $(CGAIL_FID)/H-seed2/cgail/*/ | tail -1); \
-	$(CHARCTL) eval $$S --fidelity -k 4 && $(CHARCTL) eval $$S --survival 5 -k 32 && $(CHARCTL) eval $$S --dtw --confusion --switch walk right_kick -k 8
+	$(call cgail-evaluate,$$S)
 
 repro-cgail-3skill-window-seed2: install ## cgail: run H's command at seed 2 with the moving walk reference, reward.goal_reference_window=3 (4e7 samples; ~70 min on 2 cores), evaluated
 	$(CHARCTL) train cgail reward.goal_reference_window=3 train.total_samples=$(CGAIL_FID_SAMPLES) train.checkpoint_every=20 train.keep_checkpoint_every=2500000 seed=2 output_root=$(CGAIL_FID)/H-window-seed2
 	W=$$(ls -d $(CGAIL_FID)/H-window-seed2/cgail/*/ | tail -1); \
-	$(CHARCTL) eval $$W --fidelity -k 4 && $(CHARCTL) eval $$W --survival 5 -k 32 && $(CHARCTL) eval $$W --dtw --confusion --switch walk right_kick -k 8
+	$(call cgail-evaluate,$$W)
 
 # Table 6.1's AMP column on three skills: the small preset's recipe without the command (cgail.conditional=false:
 # no class head, one style logit, no command in the state; the tracking reward, the terminations and the phase kept),
@@ -156,7 +158,7 @@ repro-cgail-3skill-amp: install ## cgail: AMP baseline on walk, run, right_kick 
 repro-cgail-3skill-window: install ## cgail: run H's command with reward.goal_reference_window=3 at seed 1 (4e7 samples; ~70 min on 2 cores), evaluated
 	$(CHARCTL) train cgail reward.goal_reference_window=3 train.total_samples=$(CGAIL_FID_SAMPLES) train.checkpoint_every=20 train.keep_checkpoint_every=2500000 seed=1 output_root=$(CGAIL_FID)/H-window
 	W=$$(ls -d $(CGAIL_FID)/H-window/cgail/*/ | tail -1); \
-	$(CHARCTL) eval $$W --fidelity -k 4 && $(CHARCTL) eval $$W --survival 5 -k 32 && $(CHARCTL) eval $$W --dtw --confusion --switch walk right_kick -k 8
+	$(call cgail-evaluate,$$W)
 
 # Starts from the policy's own states (env.own_start_weight=0.25: a quarter of the kick's starts restore a state the
 # policy reached where the kick's reference restarted at frame 0, after a pass or a walk/run -> kick ramp), at seed 2,
@@ -165,7 +167,7 @@ repro-cgail-3skill-window: install ## cgail: run H's command with reward.goal_re
 repro-cgail-3skill-own-starts-seed2: install ## cgail: run H's command at seed 2 with env.own_start_weight=0.25 (4e7 samples; ~70 min on 2 cores), evaluated
 	$(CHARCTL) train cgail env.own_start_weight=0.25 train.total_samples=$(CGAIL_FID_SAMPLES) train.checkpoint_every=20 train.keep_checkpoint_every=2500000 seed=2 output_root=$(CGAIL_FID)/own-starts-seed2
 	O=$$(ls -d $(CGAIL_FID)/own-starts-seed2/cgail/*/ | tail -1); \
-	$(CHARCTL) eval $$O --fidelity -k 4 && $(CHARCTL) eval $$O --survival 5 -k 32 && $(CHARCTL) eval $$O --dtw --confusion --switch walk right_kick -k 8
+	$(call cgail-evaluate,$$O)
 
 # The probe on top of it: that run's kept 2.5e7 checkpoint continued to 4e7 with the moving walk reference.
 .PHONY: repro-cgail-3skill-own-starts-window-seed2
@@ -174,7 +176,7 @@ repro-cgail-3skill-own-starts-window-seed2: install ## cgail: the own-starts run
 	test -f $$O/checkpoints/samples_025001984.pt || { echo "error: run make repro-cgail-3skill-own-starts-seed2 first"; exit 2; }; \
 	rm -rf $$P && mkdir -p $$P/checkpoints && cp -r $$O/config.yaml $$O/tb $$P/ && cp $$O/checkpoints/samples_025001984.pt $$P/checkpoints/last.pt && \
 	$(CHARCTL) train cgail --resume $$P reward.goal_reference_window=3 && \
-	$(CHARCTL) eval $$P --fidelity -k 4 && $(CHARCTL) eval $$P --survival 5 -k 32 && $(CHARCTL) eval $$P --dtw --confusion --switch walk right_kick -k 8
+	$(call cgail-evaluate,$$P)
 
 # Own starts and the moving walk reference from the first sample (docs/cgail.md, "Own starts and the moving walk
 # reference from scratch"), at seed CGAIL_SEED (run at 1 and 2 on 2026-12-06).
@@ -183,7 +185,7 @@ CGAIL_SEED ?= 1
 repro-cgail-3skill-own-window: install ## cgail: run H's command with env.own_start_weight=0.25 reward.goal_reference_window=3 from scratch at seed CGAIL_SEED (default 1; 4e7 samples, ~75 min on 2 cores), evaluated
 	$(CHARCTL) train cgail env.own_start_weight=0.25 reward.goal_reference_window=3 train.total_samples=$(CGAIL_FID_SAMPLES) train.checkpoint_every=20 train.keep_checkpoint_every=2500000 seed=$(CGAIL_SEED) output_root=$(CGAIL_FID)/own-window-seed$(CGAIL_SEED)
 	O=$$(ls -d $(CGAIL_FID)/own-window-seed$(CGAIL_SEED)/cgail/*/ | tail -1); \
-	$(CHARCTL) eval $$O --fidelity -k 4 && $(CHARCTL) eval $$O --survival 5 -k 32 && $(CHARCTL) eval $$O --dtw --confusion --switch walk right_kick -k 8
+	$(call cgail-evaluate,$$O)
 
 # The same with each skill's own-start share scaled by its success rate (env.own_start_by_success; run at seeds 1 and 2
 # on 2026-12-06 against the kick's late start above: seed 1 met the 3-skill targets but the flight, seed 2's kick fell
@@ -192,7 +194,7 @@ repro-cgail-3skill-own-window: install ## cgail: run H's command with env.own_st
 repro-cgail-3skill-own-window-gated: install ## cgail: repro-cgail-3skill-own-window with env.own_start_by_success=true at seed CGAIL_SEED (4e7 samples, ~80 min on 2 cores), evaluated
 	$(CHARCTL) train cgail env.own_start_weight=0.25 env.own_start_by_success=true reward.goal_reference_window=3 train.total_samples=$(CGAIL_FID_SAMPLES) train.checkpoint_every=20 train.keep_checkpoint_every=2500000 seed=$(CGAIL_SEED) output_root=$(CGAIL_FID)/own-window-gated-seed$(CGAIL_SEED)
 	O=$$(ls -d $(CGAIL_FID)/own-window-gated-seed$(CGAIL_SEED)/cgail/*/ | tail -1); \
-	$(CHARCTL) eval $$O --fidelity -k 4 && $(CHARCTL) eval $$O --survival 5 -k 32 && $(CHARCTL) eval $$O --dtw --confusion --switch walk right_kick -k 8
+	$(call cgail-evaluate,$$O)
 
 # The gate with a floor (env.own_start_floor=0.4: a failing skill keeps 0.25 x 0.4 = 0.1 of its starts from its own
 # states), against seed 2's trap under the plain gate (docs/cgail.md, "Own starts gated by success, at 4e7 samples,
@@ -201,13 +203,13 @@ repro-cgail-3skill-own-window-gated: install ## cgail: repro-cgail-3skill-own-wi
 repro-cgail-3skill-own-window-floor: install ## cgail: repro-cgail-3skill-own-window-gated with env.own_start_floor=0.4 at seed CGAIL_SEED (4e7 samples, ~80 min on 2 cores), evaluated
 	$(CHARCTL) train cgail env.own_start_weight=0.25 env.own_start_by_success=true env.own_start_floor=0.4 reward.goal_reference_window=3 train.total_samples=$(CGAIL_FID_SAMPLES) train.checkpoint_every=20 train.keep_checkpoint_every=2500000 seed=$(CGAIL_SEED) output_root=$(CGAIL_FID)/own-window-floor-seed$(CGAIL_SEED)
 	O=$$(ls -d $(CGAIL_FID)/own-window-floor-seed$(CGAIL_SEED)/cgail/*/ | tail -1); \
-	$(CHARCTL) eval $$O --fidelity -k 4 && $(CHARCTL) eval $$O --survival 5 -k 32 && $(CHARCTL) eval $$O --dtw --confusion --switch walk right_kick -k 8
+	$(call cgail-evaluate,$$O)
 
 .PHONY: repro-cgail-10skill-track4
 repro-cgail-10skill-track4: install ## cgail: the window run's ten-skill command with reward.w_track=4.0 (1.5e8 samples; ~5 h on 2 cores, resumable), evaluated
 	$(CHARCTL) train cgail "use_skills=[]" reward.w_track=4.0 reward.root_height_threshold=0.15 reward.yaw_error_threshold=1.5 reward.goal_reference_window=3 train.fidelity_every=2000000 train.total_samples=150000000 train.checkpoint_every=20 train.keep_checkpoint_every=2500000 seed=1 output_root=$(CGAIL_FID)/track4-10skill
 	T=$$(ls -d $(CGAIL_FID)/track4-10skill/cgail/*/ | tail -1); \
-	$(CHARCTL) eval $$T --fidelity -k 4 && $(CHARCTL) eval $$T --survival 5 -k 32 && $(CHARCTL) eval $$T --dtw --confusion --switch walk right_kick -k 8
+	$(call cgail-evaluate,$$T)
 
 # The tracking weight only where the style reward holds a skill back (docs/cgail.md, "Spindance": w_track = 4 for
 # every skill delays the kick and shortens the walk on three skills; on spindance alone it learns the dance, with or
@@ -218,7 +220,7 @@ repro-cgail-10skill-track4: install ## cgail: the window run's ten-skill command
 repro-cgail-10skill-track-skills: install ## cgail: the window run's ten-skill command with w_track 4 for spindance and breakdance (1.5e8 samples; ~5 h on 2 cores, resumable; = pretrained/cgail-10skill-track-skills), evaluated
 	$(CHARCTL) train cgail "use_skills=[]" "reward.w_track_skills={spindance:4.0,breakdance:4.0}" reward.root_height_threshold=0.15 reward.yaw_error_threshold=1.5 reward.goal_reference_window=3 train.fidelity_every=2000000 train.total_samples=150000000 train.checkpoint_every=20 train.keep_checkpoint_every=2500000 seed=1 output_root=$(CGAIL_FID)/track-skills
 	T=$$(ls -d $(CGAIL_FID)/track-skills/cgail/*/ | tail -1); \
-	$(CHARCTL) eval $$T --fidelity -k 4 && $(CHARCTL) eval $$T --survival 5 -k 32 && $(CHARCTL) eval $$T --dtw --confusion --switch walk right_kick -k 8
+	$(call cgail-evaluate,$$T)
 
 # Ten skills with both radii (docs/cgail.md, "Ten skills with a root-height and a heading radius"): the flight experiment's
 # root-height radius plus reward.yaw_error_threshold=1.5 (the spins must turn), run H's recipe otherwise. Started
@@ -227,7 +229,7 @@ repro-cgail-10skill-track-skills: install ## cgail: the window run's ten-skill c
 repro-cgail-10skill-radii: install ## cgail: ten skills with the root-height (0.15 m) and heading (1.5 rad) radii (1.5e8 samples; ~5 h on 2 cores, resumable), evaluated
 	$(CHARCTL) train cgail "use_skills=[]" reward.root_height_threshold=0.15 reward.yaw_error_threshold=1.5 train.fidelity_every=2000000 train.total_samples=150000000 train.checkpoint_every=20 train.keep_checkpoint_every=2500000 seed=1 output_root=$(CGAIL_FID)/radii
 	T=$$(ls -d $(CGAIL_FID)/radii/cgail/*/ | tail -1); \
-	$(CHARCTL) eval $$T --fidelity -k 4 && $(CHARCTL) eval $$T --survival 5 -k 32 && $(CHARCTL) eval $$T --dtw --confusion --switch walk right_kick -k 8
+	$(call cgail-evaluate,$$T)
 
 # The tracking baseline over all ten skills (Table 6.1's third column for every skill). ~4.6 h on 2 cores at the cGAIL
 # run's budget (9.0k samples/s measured); started 2026-12-04 and paused at 8.6e6 samples (outputs/ only, lost);
