@@ -76,7 +76,7 @@ def build_agent(cfg, device: str = "cpu", training: bool = True) -> Agent:
     from charctl.experiments.cgail.rules import state_dim as policy_state_width
 
     torch.manual_seed(cfg.seed)
-    skills = load_skills(select_skills(cfg), cfg.env.control_hz, cfg.env.shoulder_frame)
+    skills = load_skills(select_skills(cfg), cfg.env.control_hz, cfg.env.shoulder_frame, cfg.env.clip_return_seconds)
     K = len(skills)
     conditional = bool(cfg.cgail.conditional)
     state_dim = policy_state_width(cfg.reward.kind == "tracking" or cfg.env.phase_obs)

@@ -99,6 +99,13 @@ class EnvConfig:
     # gets own_start_weight x own_start_floor of its starts from its own states (the fix seed 2 asked for; added
     # 2026-12-06, one run started at seed 2, same section). 0 = the gate as it was.
     own_start_floor: float = ranged(0.0, ge=0, le=1)
+    # Seconds appended to every non-looping clip (the kicks, punches, jump, dances) that blend its last pose back to its
+    # first (charctl.motion.clip.Clip.with_return): the timed reference, RSI, the pose check, the tracking reward and
+    # the demonstrations run over clip + return, so a reference that restarts at frame 0 asks for the way back
+    # instead of jumping (the right kick ends in a guard 0.35 m, the left foot, from where it starts: the second
+    # pass that seed 2 of the gated own starts never learned). Evaluations compare with the clip alone. The return
+    # is a blend, not captured motion. 0 = the clips as they are (the paper). docs/cgail.md, "A way back".
+    clip_return_seconds: float = ranged(0.0, ge=0)
     action_scale: float = ranged(1.0, gt=0)  # PD target (rad) = rest pose + action_scale * action
     fall_tolerance: float = ranged(0.005, ge=0)  # m: a non-foot body this close to the ground ends the episode (a fall)
     goal_max_angle_deg: float = 45.0  # new heading goals lie within +- this angle of the current heading

@@ -3,6 +3,7 @@ discriminator's data pairs (o_t, o_t+1) with their class labels."""
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
@@ -26,15 +27,30 @@ class SkillData:
     mean_speed: float  # m/s planar root speed over the clip (target speed of the heading goal)
     local_rot: np.ndarray  # (T, 15, 4) for pose-error evaluation
     fps: float
+    # frames of the clip itself: T less the return appended by env.clip_return_seconds (T without one)
+    clip_frames: int
+
+    def clip_only(self) -> SkillData:
+        """This skill's arrays cut to the clip's own frames (without env.clip_return_seconds' return): what
+        the evaluations compare a policy with. The env's reference, RSI and demonstrations use all T frames."""
+        n = self.clip_frames
+        return dataclasses.replace(
+            self, qpos=self.qpos[:n], qvel=self.qvel[:n], obs=self.obs[:n], local_rot=self.local_rot[:n]
+        )
 
 
-def load_skills(skills, control_hz: float, shoulder_frame: str = "parent") -> list[SkillData]:
-    """Load and resample every skill's clip to `control_hz`; qpos/qvel for the model built with `shoulder_frame`."""
+def load_skills(
+    skills, control_hz: float, shoulder_frame: str = "parent", return_seconds: float = 0.0
+) -> list[SkillData]:
+    """Load and resample every skill's clip to `control_hz`; qpos/qvel for the model built with `shoulder_frame`.
+    `return_seconds` > 0 appends to each non-looping clip that long a blend back to its first pose
+    (`Clip.with_return`, env.clip_return_seconds), rounded to control frames."""
     out = []
     for s in skills:
         clip = load_clip(s.clip).resample(control_hz)
-        qpos, qvel = clip_to_qpos_qvel(clip, shoulder_frame)
-        obs = disc_obs(clip_kinematics(clip))
+        reference = clip.with_return(int(round(return_seconds * control_hz)))
+        qpos, qvel = clip_to_qpos_qvel(reference, shoulder_frame)
+        obs = disc_obs(clip_kinematics(reference))
         planar = np.linalg.norm(np.diff(clip.root_pos[:, [0, 2]], axis=0), axis=1).sum()
         out.append(
             SkillData(
@@ -46,8 +62,9 @@ def load_skills(skills, control_hz: float, shoulder_frame: str = "parent") -> li
                 obs,
                 clip.loop,
                 float(planar / max(clip.duration, 1e-9)),
-                clip.local_rot,
+                reference.local_rot,
                 clip.fps,
+                clip.num_frames,
             )
         )
     return out
