@@ -104,8 +104,9 @@ class EnvConfig:
     # the demonstrations run over clip + return, so a reference that restarts at frame 0 asks for the way back
     # instead of jumping (the right kick ends in a guard 0.35 m, the left foot, from where it starts: the second
     # pass that seed 2 of the gated own starts never learned). Evaluations compare with the clip alone. The return
-    # is a blend, not captured motion. 0 = the clips as they are (the paper). One run (seed 2, 0.5 s, 2026-12-06)
-    # did not learn the kick's first pass by 4e7; not in the small preset. docs/cgail.md, "A way back".
+    # is a blend, not captured motion. 0 = the clips as they are (the paper). 2026-12-06, 0.5 s at seed 2: from the
+    # first sample the kick was not learned by 4e7; as a 5e6-sample continuation of a policy that kicked once, every
+    # pass kicked (switch 28 of 32). Not in the small preset. docs/cgail.md, "A way back".
     clip_return_seconds: float = ranged(0.0, ge=0)
     action_scale: float = ranged(1.0, gt=0)  # PD target (rad) = rest pose + action_scale * action
     fall_tolerance: float = ranged(0.005, ge=0)  # m: a non-foot body this close to the ground ends the episode (a fall)
