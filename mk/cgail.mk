@@ -213,6 +213,16 @@ repro-cgail-3skill-return: install ## cgail: repro-cgail-3skill-own-window-floor
 	O=$$(ls -d $(CGAIL_FID)/return-seed$(CGAIL_SEED)/cgail/*/ | tail -1); \
 	$(call cgail-evaluate,$$O)
 
+# The way back switched on per skill only once its first pass works (env.clip_return_after_coverage=0.5: the kick's
+# training fidelity coverage at 0.5; docs/cgail.md, "The way back once the first pass works"): from the first sample the
+# return never let seed 2 learn the first kick, while added to a policy that kicked once it gave every pass. Started at
+# seed 2 on 2026-12-06.
+.PHONY: repro-cgail-3skill-return-gated
+repro-cgail-3skill-return-gated: install ## cgail: repro-cgail-3skill-return with the kick's return switched on at coverage 0.5 at seed CGAIL_SEED (4e7 samples, ~85 min on 2 cores), evaluated
+	$(CHARCTL) train cgail env.own_start_weight=0.25 env.own_start_by_success=true env.own_start_floor=0.4 reward.goal_reference_window=3 env.clip_return_seconds=0.5 env.clip_return_after_coverage=0.5 train.total_samples=$(CGAIL_FID_SAMPLES) train.checkpoint_every=20 train.keep_checkpoint_every=2500000 seed=$(CGAIL_SEED) output_root=$(CGAIL_FID)/return-gated-seed$(CGAIL_SEED)
+	O=$$(ls -d $(CGAIL_FID)/return-gated-seed$(CGAIL_SEED)/cgail/*/ | tail -1); \
+	$(call cgail-evaluate,$$O)
+
 .PHONY: repro-cgail-10skill-track4
 repro-cgail-10skill-track4: install ## cgail: the window run's ten-skill command with reward.w_track=4.0 (1.5e8 samples; ~5 h on 2 cores, resumable), evaluated
 	$(CHARCTL) train cgail "use_skills=[]" reward.w_track=4.0 reward.root_height_threshold=0.15 reward.yaw_error_threshold=1.5 reward.goal_reference_window=3 train.fidelity_every=2000000 train.total_samples=150000000 train.checkpoint_every=20 train.keep_checkpoint_every=2500000 seed=1 output_root=$(CGAIL_FID)/track4-10skill

@@ -9,6 +9,7 @@ never import the training modules (train.py, rollout.py, disc_update.py).
 from __future__ import annotations
 
 import functools
+from collections.abc import Collection
 from dataclasses import dataclass, field
 
 import torch
@@ -50,6 +51,11 @@ class Agent:
         return len(self.skills)
 
     @property
+    def returning(self) -> tuple[str, ...]:
+        """Names of the skills whose reference has env.clip_return_seconds' way back appended."""
+        return tuple(s.name for s in self.skills if len(s.obs) > s.clip_frames)
+
+    @property
     def training(self) -> bool:
         """True when the agent holds its training state (optimisers, demonstrations, replay buffer)."""
         return self.ppo is not None
@@ -76,7 +82,7 @@ def build_agent(cfg, device: str = "cpu", training: bool = True) -> Agent:
     from charctl.experiments.cgail.rules import state_dim as policy_state_width
 
     torch.manual_seed(cfg.seed)
-    skills = load_skills(select_skills(cfg), cfg.env.control_hz, cfg.env.shoulder_frame, cfg.env.clip_return_seconds)
+    skills = _load_skills(cfg, None if cfg.env.clip_return_after_coverage <= 0 else ())
     K = len(skills)
     conditional = bool(cfg.cgail.conditional)
     state_dim = policy_state_width(cfg.reward.kind == "tracking" or cfg.env.phase_obs)
@@ -99,6 +105,26 @@ def build_agent(cfg, device: str = "cpu", training: bool = True) -> Agent:
         demos.to_device(device)
         agent.device_generator = torch.Generator(device=device).manual_seed(int(cfg.seed) + 104729)
     return agent
+
+
+def _load_skills(cfg, returning: Collection[str] | None) -> list:
+    """The skills of `cfg`, the way back (env.clip_return_seconds) appended to those named in `returning` (None:
+    every non-looping clip; () at the start of a run with env.clip_return_after_coverage)."""
+    env = cfg.env
+    return load_skills(select_skills(cfg), env.control_hz, env.shoulder_frame, env.clip_return_seconds, returning)
+
+
+def set_returning(agent: Agent, names: Collection[str], env: CgailEnv | None = None) -> None:
+    """Give exactly the skills `names` the way back (env.clip_return_after_coverage switching one on, or a
+    checkpoint's `returning` on load): the agent's skills, its demonstration pairs (training; the discriminator's
+    normaliser stays as it was) and `env`'s reference tables are rebuilt; running episodes go on."""
+    agent.skills = _load_skills(agent.cfg, set(names))
+    if agent.demos is not None:
+        agent.demos = DemoPairs(agent.skills)
+        if torch.device(agent.device).type != "cpu":
+            agent.demos.to_device(agent.device)
+    if env is not None:
+        env.use_skills(agent.skills)
 
 
 def _discriminator(cfg, pair_dim: int, num_skills: int) -> Discriminator:
@@ -135,6 +161,7 @@ def agent_state(agent: Agent, env: CgailEnv | None = None) -> dict:
         "gen_rng": agent.generator.get_state(),
         "skills": [s.name for s in agent.skills],
         "clips": [s.clip_name for s in agent.skills],
+        "returning": list(agent.returning),
     }
     if agent.device_generator is not None:  # demonstration pairs drawn on the device
         state["device_gen_rng"] = agent.device_generator.get_state().cpu()
@@ -164,6 +191,7 @@ def load_agent_state(agent: Agent, state: dict, env: CgailEnv | None = None) -> 
         agent.device_generator.set_state(state["device_gen_rng"].cpu())
     if env is not None:
         env.arrays.set_random_state(state)
+    _restore_returning(agent, state, env)
 
 
 def load_policy_state(agent: Agent, state: dict) -> None:
@@ -173,3 +201,10 @@ def load_policy_state(agent: Agent, state: dict) -> None:
     agent.disc.load_state_dict(state["disc"])
     agent.iteration, agent.samples = int(state["iteration"]), int(state["samples"])
     agent.unstable_total = int(state.get("unstable_total", 0))
+    _restore_returning(agent, state)
+
+
+def _restore_returning(agent: Agent, state: dict, env: CgailEnv | None = None) -> None:
+    """The skills with a way back as the checkpoint trained them (checkpoints before 2026-12-06: as the config)."""
+    if "returning" in state and set(state["returning"]) != set(agent.returning):
+        set_returning(agent, state["returning"], env)

@@ -108,6 +108,14 @@ class EnvConfig:
     # first sample the kick was not learned by 4e7; as a 5e6-sample continuation of a policy that kicked once, every
     # pass kicked (switch 28 of 32). Not in the small preset. docs/cgail.md, "A way back".
     clip_return_seconds: float = ranged(0.0, ge=0)
+    # With env.clip_return_seconds: a skill's return is switched on only once its training fidelity coverage
+    # (fidelity/<skill>/coverage, every train.fidelity_every samples) reaches this; until then its reference is the
+    # clip as it is. Against the return from the first sample, which at seed 2 never learned the first kick (the
+    # guard's 0.170 at 4e7), while the same policy that kicked once learned every pass within 5e6 samples once the
+    # return was added. The skills switched on are in the checkpoint (`Agent.returning`), so a resumed run and every
+    # evaluation use the reference it trained on (logged as returning/<skill>). 0 = from the first sample. Added
+    # 2026-12-06 (docs/cgail.md, "The way back once the first pass works").
+    clip_return_after_coverage: float = ranged(0.0, ge=0, le=1)
     action_scale: float = ranged(1.0, gt=0)  # PD target (rad) = rest pose + action_scale * action
     fall_tolerance: float = ranged(0.005, ge=0)  # m: a non-foot body this close to the ground ends the episode (a fall)
     goal_max_angle_deg: float = 45.0  # new heading goals lie within +- this angle of the current heading
@@ -404,6 +412,11 @@ def _check_env(cfg) -> str | None:
         return "env.own_start_by_success scales env.own_start_weight: set env.own_start_weight > 0 with it"
     if env.own_start_floor > 0 and not env.own_start_by_success:
         return "env.own_start_floor bounds env.own_start_by_success's factor: set env.own_start_by_success=true with it"
+    if env.clip_return_after_coverage > 0 and (env.clip_return_seconds <= 0 or cfg.train.fidelity_every <= 0):
+        return (
+            "env.clip_return_after_coverage gates env.clip_return_seconds by the training fidelity: set "
+            "env.clip_return_seconds > 0 and train.fidelity_every > 0 with it"
+        )
     if env.own_start_weight > 0:
         r = cfg.reward
         if r.kind != "adversarial" or not (env.phase_obs or r.pose_error_threshold > 0) or r.pose_error_grace_steps < 1:

@@ -159,6 +159,21 @@ class CgailEnv:
         lead = start_frames.lead_window_index(*clips, self.cfg.start_failure_lead)
         self._lead = tuple(a.array(x, i64) for x in lead)  # each start frame's lead window
 
+    def use_skills(self, skills: list[SkillData]) -> None:
+        """Swap in `skills` (the same skills in the same order, other reference lengths: env.clip_return_after_coverage
+        switching a way back on, or a checkpoint's on load): the per-skill tables are rebuilt, the failure counts per
+        reference frame (env.start_failure_weight) kept where the frame still exists, and every running episode goes
+        on from its reference frame (clamped to its clip's new last frame)."""
+        old = self.frame_failures
+        self.skills = skills
+        self._load_skill_tables(skills)
+        a = self.arrays
+        self.frame_failures = a.zeros((self.K, max(len(s.obs) for s in skills)), old.dtype)
+        keep = min(old.shape[1], self.frame_failures.shape[1])
+        self.frame_failures[:, :keep] = old[:, :keep]
+        xp = namespace(self.ref_frame)
+        self.ref_frame = xp.minimum(self.ref_frame, self.clip_frames[self.cmd] - 1)
+
     def _init_env_state(self) -> None:
         """The per-env state before the first reset: commands, ramp weights, step counts, heading goals,
         reference frames and checks, failure rates per skill, evaluation overrides, the state / observation."""

@@ -4,6 +4,7 @@ discriminator's data pairs (o_t, o_t+1) with their class labels."""
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Collection
 from dataclasses import dataclass
 
 import numpy as np
@@ -40,15 +41,21 @@ class SkillData:
 
 
 def load_skills(
-    skills, control_hz: float, shoulder_frame: str = "parent", return_seconds: float = 0.0
+    skills,
+    control_hz: float,
+    shoulder_frame: str = "parent",
+    return_seconds: float = 0.0,
+    returning: Collection[str] | None = None,
 ) -> list[SkillData]:
     """Load and resample every skill's clip to `control_hz`; qpos/qvel for the model built with `shoulder_frame`.
     `return_seconds` > 0 appends to each non-looping clip that long a blend back to its first pose
-    (`Clip.with_return`, env.clip_return_seconds), rounded to control frames."""
+    (`Clip.with_return`, env.clip_return_seconds), rounded to control frames; with `returning`, only to the
+    skills named in it (env.clip_return_after_coverage)."""
     out = []
     for s in skills:
         clip = load_clip(s.clip).resample(control_hz)
-        reference = clip.with_return(int(round(return_seconds * control_hz)))
+        seconds = return_seconds if returning is None or s.name in returning else 0.0
+        reference = clip.with_return(int(round(seconds * control_hz)))
         qpos, qvel = clip_to_qpos_qvel(reference, shoulder_frame)
         obs = disc_obs(clip_kinematics(reference))
         planar = np.linalg.norm(np.diff(clip.root_pos[:, [0, 2]], axis=0), axis=1).sum()
@@ -68,6 +75,15 @@ def load_skills(
             )
         )
     return out
+
+
+def returning_after(
+    coverage: dict[str, float], skills: list[SkillData], gate: float, returning: Collection[str]
+) -> tuple[str, ...]:
+    """env.clip_return_after_coverage: the skills with a way back after a training fidelity check, `coverage` per
+    skill name (fidelity/<skill>/coverage): those that had one, and each non-looping skill whose coverage reached
+    `gate` (a skill once switched on stays on)."""
+    return tuple(s.name for s in skills if s.name in returning or (not s.loop and coverage.get(s.name, 0.0) >= gate))
 
 
 def preflight(cfg) -> None:
