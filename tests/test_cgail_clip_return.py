@@ -41,7 +41,10 @@ def test_evaluations_compare_with_the_clip_alone(plain_and_returned):
     plain, returned = plain_and_returned
     own = returned[1].clip_only()
     assert len(own.obs) == len(own.qpos) == len(own.local_rot) == 47
-    np.testing.assert_allclose(own.qpos, plain[1].qpos, atol=1e-9)  # poses; the last frame's velocities see the return
+    for key in ("qpos", "qvel", "obs", "local_rot"):  # the clip's own velocities too, at its last frame as well
+        np.testing.assert_allclose(getattr(own, key), getattr(plain[1], key), atol=1e-9, err_msg=key)
+    assert not np.allclose(returned[1].obs[46], plain[1].obs[46])  # the reference's last clip frame runs on
+    assert returned[0].own_obs is None and plain[1].own_obs is None  # no return: nothing kept twice
     a, b = clip_reference(plain[1]), clip_reference(returned[1])
     np.testing.assert_allclose(b.body_pos, a.body_pos, atol=1e-9)
     assert b.signature() == pytest.approx(a.signature(), abs=1e-9)

@@ -30,13 +30,19 @@ class SkillData:
     fps: float
     # frames of the clip itself: T less the return appended by env.clip_return_seconds (T without one)
     clip_frames: int
+    # with a return: the clip's own (clip_frames, nv) / (clip_frames, 133) velocities and observations (its last
+    # frame's finite differences differ from those of qvel / obs, which run on into the return); None without one
+    own_qvel: np.ndarray | None = None
+    own_obs: np.ndarray | None = None
 
     def clip_only(self) -> SkillData:
-        """This skill's arrays cut to the clip's own frames (without env.clip_return_seconds' return): what
-        the evaluations compare a policy with. The env's reference, RSI and demonstrations use all T frames."""
+        """This skill's arrays as the clip alone (without env.clip_return_seconds' return): what the evaluations
+        compare a policy with. The env's reference, RSI and demonstrations use all T frames."""
         n = self.clip_frames
+        qvel = self.qvel[:n] if self.own_qvel is None else self.own_qvel
+        obs = self.obs[:n] if self.own_obs is None else self.own_obs
         return dataclasses.replace(
-            self, qpos=self.qpos[:n], qvel=self.qvel[:n], obs=self.obs[:n], local_rot=self.local_rot[:n]
+            self, qpos=self.qpos[:n], qvel=qvel, obs=obs, local_rot=self.local_rot[:n], own_qvel=None, own_obs=None
         )
 
 
@@ -59,6 +65,10 @@ def load_skills(
         qpos, qvel = clip_to_qpos_qvel(reference, shoulder_frame)
         obs = disc_obs(clip_kinematics(reference))
         planar = np.linalg.norm(np.diff(clip.root_pos[:, [0, 2]], axis=0), axis=1).sum()
+        own_qvel = own_obs = None
+        if reference is not clip:  # a return appended: the clip's own velocities for `SkillData.clip_only`
+            own_qvel = clip_to_qpos_qvel(clip, shoulder_frame)[1]
+            own_obs = disc_obs(clip_kinematics(clip))
         out.append(
             SkillData(
                 s.name,
@@ -72,6 +82,8 @@ def load_skills(
                 reference.local_rot,
                 clip.fps,
                 clip.num_frames,
+                own_qvel,
+                own_obs,
             )
         )
     return out
