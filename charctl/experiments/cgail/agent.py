@@ -82,7 +82,9 @@ def build_agent(cfg, device: str = "cpu", training: bool = True) -> Agent:
     from charctl.experiments.cgail.rules import state_dim as policy_state_width
 
     torch.manual_seed(cfg.seed)
-    skills = _load_skills(cfg, None if cfg.env.clip_return_after_coverage <= 0 else ())
+    env = cfg.env
+    returning = None if env.clip_return_after_coverage <= 0 else ()  # None: every non-looping clip from the start
+    skills = load_skills(select_skills(cfg), env.control_hz, env.shoulder_frame, env.clip_return_seconds, returning)
     K = len(skills)
     conditional = bool(cfg.cgail.conditional)
     state_dim = policy_state_width(cfg.reward.kind == "tracking" or cfg.env.phase_obs)
@@ -107,18 +109,15 @@ def build_agent(cfg, device: str = "cpu", training: bool = True) -> Agent:
     return agent
 
 
-def _load_skills(cfg, returning: Collection[str] | None) -> list:
-    """The skills of `cfg`, the way back (env.clip_return_seconds) appended to those named in `returning` (None:
-    every non-looping clip; () at the start of a run with env.clip_return_after_coverage)."""
-    env = cfg.env
-    return load_skills(select_skills(cfg), env.control_hz, env.shoulder_frame, env.clip_return_seconds, returning)
-
-
 def set_returning(agent: Agent, names: Collection[str], env: CgailEnv | None = None) -> None:
     """Give exactly the skills `names` the way back (env.clip_return_after_coverage switching one on, or a
     checkpoint's `returning` on load): the agent's skills, its demonstration pairs (training; the discriminator's
-    normaliser stays as it was) and `env`'s reference tables are rebuilt; running episodes go on."""
-    agent.skills = _load_skills(agent.cfg, set(names))
+    normaliser stays as it was) and `env`'s reference tables are rebuilt; running episodes go on. Only the skills
+    whose return changes are loaded again."""
+    names, had, e = set(names), set(agent.returning), agent.cfg.env
+    changed = [c for c in select_skills(agent.cfg) if (c.name in names) != (c.name in had)]
+    fresh = {s.name: s for s in load_skills(changed, e.control_hz, e.shoulder_frame, e.clip_return_seconds, names)}
+    agent.skills = [fresh.get(s.name, s) for s in agent.skills]
     if agent.demos is not None:
         agent.demos = DemoPairs(agent.skills)
         if torch.device(agent.device).type != "cpu":

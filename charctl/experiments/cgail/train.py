@@ -123,6 +123,8 @@ class CgailLearner(AgentCounters):
             samples = agent.samples + self.samples_per_iteration  # this iteration's, as the fidelity scalars'
             print(f"note: {samples:,} samples: the way back (env.clip_return_seconds) is on for {new}")
             set_returning(agent, names, self.env)
+            if self.acting is not None:  # train.overlap_update's acting copy holds the same skills
+                self.acting.skills, self.acting.demos = agent.skills, agent.demos
         return {f"returning/{s.name}": float(s.name in names) for s in agent.skills if not s.loop}
 
     def _iterate_in_turn(self) -> dict[str, float]:
