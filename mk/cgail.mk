@@ -216,7 +216,8 @@ repro-cgail-3skill-return: install ## cgail: repro-cgail-3skill-own-window-floor
 # The way back switched on per skill only once its first pass works (env.clip_return_after_coverage=0.5: the kick's
 # training fidelity coverage at 0.5; docs/cgail.md, "The way back once the first pass works"): from the first sample the
 # return never let seed 2 learn the first kick, while added to a policy that kicked once it gave every pass. Run at
-# seed 2 on 2026-12-06: every 3-skill target but the flight, the kick's DTW (1.415) and the switch with the ramp.
+# seed 2 on 2026-12-06: every 3-skill target but the flight, the kick's DTW (1.415) and the switch with the ramp;
+# at seed 1 the same day: DTW met for all three, but the kick's no-fall 0.781 and the switch 0 of 32 (it walks on).
 .PHONY: repro-cgail-3skill-return-gated
 repro-cgail-3skill-return-gated: install ## cgail: repro-cgail-3skill-return with the kick's return switched on at coverage 0.5 at seed CGAIL_SEED (4e7 samples, ~85 min on 2 cores), evaluated
 	$(CHARCTL) train cgail env.own_start_weight=0.25 env.own_start_by_success=true env.own_start_floor=0.4 reward.goal_reference_window=3 env.clip_return_seconds=0.5 env.clip_return_after_coverage=0.5 train.total_samples=$(CGAIL_FID_SAMPLES) train.checkpoint_every=20 train.keep_checkpoint_every=2500000 seed=$(CGAIL_SEED) output_root=$(CGAIL_FID)/return-gated-seed$(CGAIL_SEED)

@@ -115,8 +115,9 @@ class EnvConfig:
     # return was added. The skills switched on are in the checkpoint (`Agent.returning`), so a resumed run and every
     # evaluation use the reference it trained on (logged as returning/<skill>). 0 = from the first sample. Added
     # 2026-12-06; 0.5 at seed 2 (make repro-cgail-3skill-return-gated): the kick's return on at 2.3e7, at 4e7 walk, run
-    # and every pass of the kick (no-fall 1.000), the switch only without the ramp; seed 1 not run yet, so not in the
-    # small preset (docs/cgail.md, "The way back once the first pass works").
+    # and every pass of the kick (no-fall 1.000), the switch only without the ramp; at seed 1 every pass of the kick,
+    # but its no-fall 0.781 and the switch 0 of 32 (it walks on). Not in the small preset (docs/cgail.md, "The way back
+    # once the first pass works").
     clip_return_after_coverage: float = ranged(0.0, ge=0, le=1)
     action_scale: float = ranged(1.0, gt=0)  # PD target (rad) = rest pose + action_scale * action
     fall_tolerance: float = ranged(0.005, ge=0)  # m: a non-foot body this close to the ground ends the episode (a fall)
