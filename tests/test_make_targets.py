@@ -56,6 +56,7 @@ def test_every_fresh_training_line_composes(target):
         ("repro-cgail-3skill-own-window-floor", 0.25, True, 0.4, 0.0, 0.0, 3),
         ("repro-cgail-3skill-return", 0.25, True, 0.4, 0.5, 0.0, 3),
         ("repro-cgail-3skill-return-gated", 0.25, True, 0.4, 0.5, 0.5, 3),
+        ("repro-cgail-3skill-return-gated-switch", 0.25, True, 0.4, 0.5, 0.5, 3),
     ],
 )
 def test_the_lineage_targets_train_the_keys_their_sections_name(target, own, gated, floor, returning, after, window):
@@ -69,3 +70,4 @@ def test_the_lineage_targets_train_the_keys_their_sections_name(target, own, gat
         window,
     )
     assert (cfg.env.phase_obs, cfg.disc.style_head, cfg.train.total_samples) == (True, "per_skill", 40_000_000)
+    assert cfg.env.switch_prob == (0.03 if target.endswith("-switch") else 0.01)
