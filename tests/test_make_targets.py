@@ -70,4 +70,4 @@ def test_the_lineage_targets_train_the_keys_their_sections_name(target, own, gat
         window,
     )
     assert (cfg.env.phase_obs, cfg.disc.style_head, cfg.train.total_samples) == (True, "per_skill", 40_000_000)
-    assert cfg.env.switch_prob == (0.03 if target.endswith("-switch") else 0.01)
+    assert (cfg.env.switch_prob, cfg.env.switch_prob_after_returns) == (0.01, 0.03 if target.endswith("-switch") else 0)

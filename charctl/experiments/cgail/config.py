@@ -119,6 +119,13 @@ class EnvConfig:
     # but its no-fall 0.781 and the switch 0 of 32 (it walks on). Not in the small preset (docs/cgail.md, "The way back
     # once the first pass works").
     clip_return_after_coverage: float = ranged(0.0, ge=0, le=1)
+    # With env.clip_return_after_coverage: the switch probability (as env.switch_prob) once every non-looping skill's
+    # return is on; until then env.switch_prob. Three times the switches from the first sample (make
+    # repro-cgail-3skill-return-gated-switch) delayed the first kick at seed 1 (foot 0.20-0.25 m at 1.1-1.5e7 against
+    # > 1.0 m by 1.0e7 without), while 5e6 samples at 0.03 after 4e7 taught the walk -> kick switch at both seeds;
+    # this gives the switches once the kick's way back works, in one run. 0 = env.switch_prob throughout. Added
+    # 2026-12-06 (docs/cgail.md, "More switches once the way back is on").
+    switch_prob_after_returns: float = ranged(0.0, ge=0, le=1)
     action_scale: float = ranged(1.0, gt=0)  # PD target (rad) = rest pose + action_scale * action
     fall_tolerance: float = ranged(0.005, ge=0)  # m: a non-foot body this close to the ground ends the episode (a fall)
     goal_max_angle_deg: float = 45.0  # new heading goals lie within +- this angle of the current heading
@@ -360,7 +367,7 @@ def _check_rewards(cfg) -> str | None:
     if (msg := _check_track_skills(cfg)) is not None:
         return msg
     n_skills = len(cfg.use_skills) if cfg.use_skills else len(cfg.skills)
-    if r.kind == "tracking" and n_skills > 1 and cfg.env.switch_prob > 0:
+    if r.kind == "tracking" and n_skills > 1 and max(cfg.env.switch_prob, cfg.env.switch_prob_after_returns) > 0:
         return (
             "reward.kind=tracking over several skills needs env.switch_prob=0: the reference phase belongs to "
             "the clip an episode started with (the multi-skill tracking baseline holds one command per episode)"
@@ -419,6 +426,11 @@ def _check_env(cfg) -> str | None:
         return (
             "env.clip_return_after_coverage gates env.clip_return_seconds by the training fidelity: set "
             "env.clip_return_seconds > 0 and train.fidelity_every > 0 with it"
+        )
+    if env.switch_prob_after_returns > 0 and env.clip_return_after_coverage <= 0:
+        return (
+            "env.switch_prob_after_returns applies once env.clip_return_after_coverage has switched every return on: "
+            "set env.clip_return_after_coverage > 0 with it"
         )
     if env.own_start_weight > 0:
         r = cfg.reward

@@ -89,6 +89,9 @@ class CgailEnv:
         for MuJoCo Warp (`device`) for torch. The rule keywords come from `env_rules.env_rules`."""
         self.skills = skills
         self.cfg = env_cfg = plain_section(env_cfg)  # typed fields, cheap reads in the step loop
+        # per control step, the probability of a command switch: env.switch_prob (training raises it to
+        # env.switch_prob_after_returns once every way back is on, `skills.switch_prob_for`)
+        self.switch_prob = float(env_cfg.switch_prob)
         self.tracking = tracking  # phase in the state, reference frame advanced every step
         # training only (reward.pose_error_threshold): end episodes that leave the clip's timed reference
         self.pose_threshold, self.pose_grace = float(pose_error_threshold), int(pose_error_grace_steps)
@@ -436,8 +439,8 @@ class CgailEnv:
         self.own_starts.keep(self.sim.qpos, self.sim.qvel, self.cmd, fresh)
 
     def _maybe_switch(self, mask) -> None:
-        """Switch each env in `mask` to a random command with probability env.switch_prob."""
-        if self.K < 2 or self.cfg.switch_prob <= 0 or self.forced_command is not None:
+        """Switch each env in `mask` to a random command with probability `self.switch_prob`."""
+        if self.K < 2 or self.switch_prob <= 0 or self.forced_command is not None:
             return
         switch, new = self.arrays.switches(self, mask)
         if not self.on_device and not switch.any():

@@ -98,6 +98,14 @@ def returning_after(
     return tuple(s.name for s in skills if s.name in returning or (not s.loop and coverage.get(s.name, 0.0) >= gate))
 
 
+def switch_prob_for(env_cfg, skills: list[SkillData], returning: Collection[str]) -> float:
+    """The per-step command switch probability of a training env: env.switch_prob_after_returns once every
+    non-looping skill of `skills` is in `returning` (and that knob is set), env.switch_prob otherwise."""
+    after = float(env_cfg.switch_prob_after_returns)
+    on = all(s.loop or s.name in returning for s in skills) and any(not s.loop for s in skills)
+    return after if after > 0 and on else float(env_cfg.switch_prob)
+
+
 def preflight(cfg) -> None:
     """`charctl train`'s check before the run directory is made: the clip of every selected skill loads
     (`load_skills` loads and resamples them again)."""
