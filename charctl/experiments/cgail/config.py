@@ -124,7 +124,9 @@ class EnvConfig:
     # repro-cgail-3skill-return-gated-switch) delayed the first kick at seed 1 (foot 0.20-0.25 m at 1.1-1.5e7 against
     # > 1.0 m by 1.0e7 without), while 5e6 samples at 0.03 after 4e7 taught the walk -> kick switch at both seeds;
     # this gives the switches once the kick's way back works, in one run. 0 = env.switch_prob throughout. Added
-    # 2026-12-06 (docs/cgail.md, "More switches once the way back is on").
+    # 2026-12-06; 0.03 at seed 1 (make repro-cgail-3skill-return-gated-switch): every 3-skill target but the flight at
+    # 4e7, the walk -> kick switch 32 of 32 with the ramp; not in the small preset until seed 2 passes too
+    # (docs/cgail.md, "More switches once the way back is on").
     switch_prob_after_returns: float = ranged(0.0, ge=0, le=1)
     action_scale: float = ranged(1.0, gt=0)  # PD target (rad) = rest pose + action_scale * action
     fall_tolerance: float = ranged(0.005, ge=0)  # m: a non-foot body this close to the ground ends the episode (a fall)
