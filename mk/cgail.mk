@@ -227,8 +227,8 @@ repro-cgail-3skill-return-gated: install ## cgail: repro-cgail-3skill-return wit
 # The gated return with three times the command switches in training once the kick's way back is on
 # (env.switch_prob_after_returns=0.03 against the preset's env.switch_prob=0.01): continued 5e6 samples at
 # env.switch_prob=0.03 from each seed's 4e7 state above, it gave the walk -> kick switch at both seeds (32 of 32 with the
-# ramp) and every 3-skill target but the flight at seed 2; env.switch_prob=0.03 from the first sample delayed the first
-# kick at seed 1 (stopped at 1.54e7 with the foot at 0.2 m). Run at seed 1 on 2026-12-06: every 3-skill target but the
+# ramp) and every 3-skill target but the flight at seed 2; env.switch_prob=0.03 from the first sample had the first
+# kick late at seed 1 (stopped at 1.54e7 with the foot at 0.2 m; a rerun without them was as late at 1.1-2.2e7). Run at seed 1 on 2026-12-06: every 3-skill target but the
 # flight, the switch 32 of 32 with the ramp. docs/cgail.md, "More switches once the way back is on".
 .PHONY: repro-cgail-3skill-return-gated-switch
 repro-cgail-3skill-return-gated-switch: install ## cgail: repro-cgail-3skill-return-gated with env.switch_prob_after_returns=0.03 at seed CGAIL_SEED (4e7 samples, ~90 min on 2 cores), evaluated

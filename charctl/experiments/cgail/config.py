@@ -120,10 +120,10 @@ class EnvConfig:
     # once the first pass works").
     clip_return_after_coverage: float = ranged(0.0, ge=0, le=1)
     # With env.clip_return_after_coverage: the switch probability (as env.switch_prob) once every non-looping skill's
-    # return is on; until then env.switch_prob. Three times the switches from the first sample (make
-    # repro-cgail-3skill-return-gated-switch) delayed the first kick at seed 1 (foot 0.20-0.25 m at 1.1-1.5e7 against
-    # > 1.0 m by 1.0e7 without), while 5e6 samples at 0.03 after 4e7 taught the walk -> kick switch at both seeds;
-    # this gives the switches once the kick's way back works, in one run. 0 = env.switch_prob throughout. Added
+    # return is on; until then env.switch_prob. 5e6 samples at env.switch_prob=0.03 after 4e7 taught the walk -> kick
+    # switch at both seeds; 0.03 from the first sample had the first kick late at seed 1 (foot 0.20-0.25 m at
+    # 1.1-1.5e7; a rerun without the extra switches was as late, so that is not pinned on them); this gives the
+    # switches once the kick's way back works, in one run. 0 = env.switch_prob throughout. Added
     # 2026-12-06; 0.03 at seed 1 (make repro-cgail-3skill-return-gated-switch): every 3-skill target but the flight at
     # 4e7, the walk -> kick switch 32 of 32 with the ramp; not in the small preset until seed 2 passes too
     # (docs/cgail.md, "More switches once the way back is on").
@@ -371,8 +371,9 @@ def _check_rewards(cfg) -> str | None:
     n_skills = len(cfg.use_skills) if cfg.use_skills else len(cfg.skills)
     if r.kind == "tracking" and n_skills > 1 and max(cfg.env.switch_prob, cfg.env.switch_prob_after_returns) > 0:
         return (
-            "reward.kind=tracking over several skills needs env.switch_prob=0: the reference phase belongs to "
-            "the clip an episode started with (the multi-skill tracking baseline holds one command per episode)"
+            "reward.kind=tracking over several skills needs env.switch_prob=0 (and no env.switch_prob_after_returns): "
+            "the reference phase belongs to the clip an episode started with (the multi-skill tracking baseline holds "
+            "one command per episode)"
         )
     return None
 
