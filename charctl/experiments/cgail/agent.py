@@ -16,7 +16,7 @@ import torch
 
 from charctl.experiments.cgail.discriminator import Discriminator, ReplayBuffer
 from charctl.experiments.cgail.env import CgailEnv
-from charctl.experiments.cgail.skills import DemoPairs, load_skills, select_skills
+from charctl.experiments.cgail.skills import DemoPairs, load_skills, select_skills, switch_prob_for
 from charctl.rl.ppo import PPO, ActorCritic, make_adam
 
 
@@ -112,8 +112,8 @@ def build_agent(cfg, device: str = "cpu", training: bool = True) -> Agent:
 def set_returning(agent: Agent, names: Collection[str], env: CgailEnv | None = None) -> None:
     """Give exactly the skills `names` the way back (env.clip_return_after_coverage switching one on, or a
     checkpoint's `returning` on load): the agent's skills, its demonstration pairs (training; the discriminator's
-    normaliser stays as it was) and `env`'s reference tables are rebuilt; running episodes go on. Only the skills
-    whose return changes are loaded again."""
+    normaliser stays as it was) and `env`'s reference tables and command switch rate (`skills.switch_prob_for`)
+    are rebuilt; running episodes go on. Only the skills whose return changes are loaded again."""
     names, had, e = set(names), set(agent.returning), agent.cfg.env
     changed = [c for c in select_skills(agent.cfg) if (c.name in names) != (c.name in had)]
     fresh = {s.name: s for s in load_skills(changed, e.control_hz, e.shoulder_frame, e.clip_return_seconds, names)}
@@ -124,6 +124,7 @@ def set_returning(agent: Agent, names: Collection[str], env: CgailEnv | None = N
             agent.demos.to_device(agent.device)
     if env is not None:
         env.use_skills(agent.skills)
+        env.switch_prob = switch_prob_for(e, agent.skills, names)
 
 
 def _discriminator(cfg, pair_dim: int, num_skills: int) -> Discriminator:

@@ -26,7 +26,7 @@ from charctl.experiments.cgail.env import CgailEnv
 from charctl.experiments.cgail.env_rules import env_rules
 from charctl.experiments.cgail.reward import discriminator_rewards, total_reward
 from charctl.experiments.cgail.rollout import Rollout, collect_rollout
-from charctl.experiments.cgail.skills import returning_after, switch_prob_for
+from charctl.experiments.cgail.skills import returning_after
 from charctl.experiments.cgail.termination import LowStyleTermination
 from charctl.rl.runner import AgentCounters, crossed_multiple
 
@@ -90,7 +90,6 @@ class CgailLearner(AgentCounters):
 
     def load_state_dict(self, state: dict) -> None:
         load_agent_state(self.agent, state, self.env)
-        self.env.switch_prob = switch_prob_for(self.cfg.env, self.agent.skills, self.agent.returning)
         self.rng = np.random.default_rng(self.cfg.seed + 7919 * (self.agent.iteration + 1))
 
     def signature(self) -> dict:
@@ -126,7 +125,6 @@ class CgailLearner(AgentCounters):
             set_returning(agent, names, self.env)
             if self.acting is not None:  # train.overlap_update's acting copy holds the same skills
                 self.acting.skills, self.acting.demos = agent.skills, agent.demos
-            self.env.switch_prob = switch_prob_for(self.cfg.env, agent.skills, names)
         out = {f"returning/{s.name}": float(s.name in names) for s in agent.skills if not s.loop}
         return out | {"returning/switch_prob": self.env.switch_prob}
 
