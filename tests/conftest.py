@@ -47,23 +47,14 @@ def with_fault_hooks(env: dict[str, str]) -> dict[str, str]:
     return env
 
 
-def cgail_make_words(name: str) -> list[str]:
-    """The words of mk/cgail.mk's `name := ...` (continued lines joined), its `$(VAR)` references expanded."""
-    import re
-
-    text = (REPO / "mk" / "cgail.mk").read_text()
-    body = re.search(rf"^{name} := (.*?)\n(?!\t)", text, re.S | re.M).group(1).replace("\\\n", " ")
-    words = []
-    for word in body.split():
-        ref = re.fullmatch(r"\$\((\w+)\)", word)
-        words += cgail_make_words(ref.group(1)) if ref else [word]
-    return words
-
-
 def cgail_paper_recipe() -> list[str]:
     """mk/cgail.mk's CGAIL_PAPER_RECIPE: the `~key` deletions that return the small preset's fidelity-recipe keys to
     the schema's (the paper's) values."""
-    return cgail_make_words("CGAIL_PAPER_RECIPE")
+    import re
+
+    text = (REPO / "mk" / "cgail.mk").read_text()
+    body = re.search(r"^CGAIL_PAPER_RECIPE := (.*?)\n(?!\t)", text, re.S | re.M).group(1)
+    return body.replace("\\\n", " ").split()
 
 
 # the fidelity recipe's env rules, for the parity and smoke tests of the torch envs (Warp, torch on the CPU)

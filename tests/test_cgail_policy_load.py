@@ -73,12 +73,11 @@ def test_inference_agent_loads_the_networks_of_a_training_agent():
 
 
 def _recorded_run(tmp_path: Path, section: str = "", key: str = "", value=None) -> Path:
-    """A copy of run H's config.yaml (tests/data/cgail_run_h_config.yaml: pretrained/cgail-3skill-fidelity until
-    2026-12-06, which lists every key removed on 2026-12-03 at its neutral value) in a run folder of its own, with
-    `section.key` set to `value` when given."""
+    """A copy of pretrained/cgail-3skill-fidelity's config.yaml (which lists every key removed on 2026-12-03
+    at its neutral value) in a run folder of its own, with `section.key` set to `value` when given."""
     import yaml
 
-    cfg = yaml.safe_load((REPO / "tests" / "data" / "cgail_run_h_config.yaml").read_text())
+    cfg = yaml.safe_load((PRETRAINED / "cgail-3skill-fidelity" / "config.yaml").read_text())
     if key:
         cfg[section][key] = value
     run = tmp_path / "run"

@@ -1,7 +1,6 @@
-"""The small preset carries the fidelity recipe; run H's recipe and the paper's reward stay reachable with `~key`
-deletions (mk/cgail.mk's CGAIL_RUN_H and CGAIL_PAPER_RECIPE); the AMP and tracking baselines drop the recipe keys
-that do not apply to them when a config is composed, but not a key the command line sets, and not in a recorded
-run's config."""
+"""The small preset carries the fidelity recipe; the paper's reward stays reachable with `~key` deletions
+(mk/cgail.mk's CGAIL_PAPER_RECIPE); the AMP and tracking baselines drop the recipe keys that do not apply to
+them when a config is composed, but not a key the command line sets, and not in a recorded run's config."""
 
 import pytest
 from omegaconf import OmegaConf
@@ -10,37 +9,16 @@ from charctl.config import compose_config, validate
 from charctl.errors import CharctlError
 from charctl.experiments.cgail.config import Config
 
-from conftest import REPO, cgail_make_words, cgail_paper_recipe
+from conftest import REPO, cgail_paper_recipe
 
 
 def _compose(*overrides: str):
     return compose_config("cgail", list(overrides), Config)
 
 
-LATE_SWITCH_ENV = {  # docs/cgail.md, "The late-switch command at seeds 1 and 2"
-    "own_start_weight": 0.25,
-    "own_start_by_success": True,
-    "own_start_floor": 0.4,
-    "clip_return_seconds": 0.5,
-    "clip_return_after_coverage": 0.5,
-    "switch_prob_after_returns": 0.03,
-}
-
-
-def test_the_small_preset_is_the_late_switch_command():
-    # mk/cgail.mk's repro-cgail-3skill-return-gated-switch before the preset took its keys, key by key
+def test_the_small_preset_is_run_h_recipe():
+    # run H's command line (docs/cgail.md, "Run H"), key by key
     cfg = _compose("scale=small")
-    assert {k: cfg.env[k] for k in LATE_SWITCH_ENV} == LATE_SWITCH_ENV
-    assert cfg.reward.goal_reference_window == 3 and cfg.env.switch_prob == 0.01
-
-
-@pytest.mark.parametrize("deleted", [(), ("CGAIL_RUN_H",)])
-def test_the_small_preset_holds_run_h_recipe(deleted):
-    # run H's command line (docs/cgail.md, "Run H"), key by key; with $(CGAIL_RUN_H) exactly it
-    cfg = _compose("scale=small", *(w for name in deleted for w in cgail_make_words(name)))
-    if deleted:
-        assert {k: cfg.env[k] for k in LATE_SWITCH_ENV} == dict.fromkeys(LATE_SWITCH_ENV, 0)
-        assert cfg.reward.goal_reference_window == 0
     assert cfg.disc.style_head == "per_skill" and cfg.disc.wrong_skill_fakes == 0.25
     assert cfg.cgail.class_on_policy is False
     assert (cfg.reward.w_style, cfg.reward.w_class, cfg.reward.class_form) == (0.8, 0.2, "prob")
@@ -52,7 +30,7 @@ def test_the_small_preset_holds_run_h_recipe(deleted):
 
 def test_the_paper_recipe_deletions_return_every_recipe_key_to_the_schema():
     deletions = cgail_paper_recipe()
-    assert len(deletions) == 20 and all(d.startswith("~") for d in deletions)
+    assert len(deletions) == 13 and all(d.startswith("~") for d in deletions)
     paper, recipe, schema = _compose("scale=small", *deletions), _compose("scale=small"), OmegaConf.structured(Config)
     for key in (d[1:] for d in deletions):
         assert OmegaConf.select(paper, key) == OmegaConf.select(schema, key), key
@@ -71,23 +49,16 @@ def test_the_baselines_drop_the_keys_that_do_not_apply():
         0.0,
         0.0,
     )
-    assert {k: tracking.env[k] for k in LATE_SWITCH_ENV} == dict.fromkeys(LATE_SWITCH_ENV, 0)  # no restarts, no return
-    assert tracking.reward.goal_reference_window == 0
-    assert amp.env.clip_return_seconds == 0.5 and amp.env.own_start_weight == 0.25  # they apply to AMP
     assert tracking.disc.style_head == "per_skill"  # conditional: the (unused) discriminator keeps the preset's head
-
-
-# no pose-error termination and nothing that needs it
-PLAIN_POSE = ("~reward.pose_error_threshold", "~reward.w_track", "~reward.goal_reference_window")
 
 
 def test_a_key_the_command_line_sets_is_not_dropped_but_refused():
     with pytest.raises(CharctlError, match="style_head=per_skill needs cgail.conditional=true"):
         _compose("scale=small", "cgail.conditional=false", "disc.style_head=per_skill")
     with pytest.raises(CharctlError, match="root_height_threshold must be >= 0, and > 0 only with"):
-        _compose("scale=small", *PLAIN_POSE, "reward.root_height_threshold=0.15")
+        _compose("scale=small", "~reward.pose_error_threshold", "~reward.w_track", "reward.root_height_threshold=0.15")
     with pytest.raises(CharctlError, match="yaw_error_threshold must be >= 0, and > 0 only with"):
-        _compose("scale=small", *PLAIN_POSE, "reward.yaw_error_threshold=1.5")
+        _compose("scale=small", "~reward.pose_error_threshold", "~reward.w_track", "reward.yaw_error_threshold=1.5")
     # the tracking baseline drops the preset's pose check; set on the command line it is kept (docs/cgail.md,
     # "Spindance": tracking episodes ended far from the clip)
     kept = _compose("scale=small", "use_skills=[walk]", "reward.kind=tracking", "reward.pose_error_threshold=0.3")

@@ -73,38 +73,17 @@ def test_the_lineage_targets_train_the_keys_their_sections_name(target, own, gat
     assert (cfg.env.switch_prob, cfg.env.switch_prob_after_returns) == (0.01, 0.03 if target.endswith("-switch") else 0)
 
 
-@pytest.mark.parametrize(
-    ("target", "window"),
-    [
-        ("repro-cgail-flight", 0),
-        ("repro-cgail-3skill-amp", 0),
-        ("repro-cgail-tracking-3skill", 0),
-        ("repro-cgail-10skill-window", 3),
-        ("repro-cgail-10skill-track-skills", 3),
-        ("repro-cgail-spindance-probes", 0),
-    ],
-)
-def test_targets_trained_before_the_late_switch_preset_train_without_its_keys(target, window):
-    """$(CGAIL_RUN_H) keeps what these runs trained with: no own starts, no way back, no later switch rate."""
-    for argv in _train_overrides(target):
-        cfg = compose_config("cgail", argv, Config)
-        env = cfg.env
-        assert (env.own_start_weight, env.own_start_by_success, env.own_start_floor) == (0, False, 0), argv
-        assert (env.clip_return_seconds, env.clip_return_after_coverage, env.switch_prob_after_returns) == (0, 0, 0)
-        assert cfg.reward.goal_reference_window == (0 if cfg.reward.kind == "tracking" else window), argv
-
-
-def test_the_ten_skill_late_switch_target_is_the_running_command():
-    """repro-cgail-10skill-late-switch on the preset = the command started 2026-12-06, its seven keys spelled out."""
-    (argv,) = _train_overrides("repro-cgail-10skill-late-switch")
-    cfg = compose_config("cgail", argv, Config)
-    spelled = compose_config(
-        "cgail",
-        [a for a in argv if not a.startswith("output_root")]
-        + ["env.own_start_weight=0.25", "env.own_start_by_success=true", "env.own_start_floor=0.4"]
-        + ["env.clip_return_seconds=0.5", "env.clip_return_after_coverage=0.5", "env.switch_prob_after_returns=0.03"]
-        + ["reward.goal_reference_window=3", f"output_root={cfg.output_root}"],
-        Config,
-    )
-    assert cfg == spelled and cfg.use_skills == []
-    assert cfg.reward.w_track_skills == {"spindance": 4.0, "breakdance": 4.0}
+def test_the_ten_skill_late_switch_target_adds_the_three_skill_keys_to_the_ten_skill_command():
+    """repro-cgail-10skill-late-switch = repro-cgail-10skill-track-skills's config with the late-switch env keys of
+    repro-cgail-3skill-return-gated-switch (and its own output folder and checkpoint spacing)."""
+    (ten,) = _train_overrides("repro-cgail-10skill-late-switch")
+    (track,) = _train_overrides("repro-cgail-10skill-track-skills")
+    (late,) = _train_overrides("repro-cgail-3skill-return-gated-switch")
+    cfg, base, three = (compose_config("cgail", a, Config) for a in (ten, track, late))
+    keys = ("own_start_weight", "own_start_by_success", "own_start_floor", "clip_return_seconds")
+    keys += ("clip_return_after_coverage", "switch_prob_after_returns")
+    assert {k: cfg.env[k] for k in keys} == {k: three.env[k] for k in keys} != {k: base.env[k] for k in keys}
+    for k in keys:
+        base.env[k] = three.env[k]
+    base.output_root, base.train.keep_checkpoint_every = cfg.output_root, cfg.train.keep_checkpoint_every
+    assert cfg == base and cfg.use_skills == [] and cfg.train.total_samples == 150_000_000

@@ -295,20 +295,14 @@ class Config(BaseConfig):
         baselines as they are: the AMP baseline (cgail.conditional=false) has no command to pick a style logit
         for, so no per-skill head and no wrong-skill fakes; the tracking baseline (reward.kind=tracking) has no
         discriminator and its episodes end on a fall or at the clip's end only (docs/cgail.md, "Tracking
-        baseline"), so no low-style or pose-error termination, no extra tracking reward, no starts from its own
-        restart states and no way back appended to a clip (its clip runs on without restarting), and so no raised
-        switch rate after the way back."""
+        baseline"), so no low-style or pose-error termination, no extra tracking reward and no starts from its own
+        restart states (its clip runs on without restarting)."""
         keys = []
         if not cfg.cgail.conditional:
             keys += ["disc.style_head", "disc.wrong_skill_fakes"]
         if cfg.reward.kind == "tracking":
             keys += [
                 "env.own_start_weight",
-                "env.own_start_by_success",
-                "env.own_start_floor",
-                "env.clip_return_seconds",
-                "env.clip_return_after_coverage",
-                "env.switch_prob_after_returns",
                 "reward.low_style_threshold",
                 "reward.pose_error_threshold",
                 "reward.root_height_threshold",
