@@ -46,6 +46,7 @@ MODES = [
     ("eval-cgail-dtw", "eval {cgail} --dtw -k 1 --checkpoint nosuch.pt -o {out}", ["nosuch.pt"]),
     ("eval-cgail-confusion", "eval {amp} --confusion -k 1 -o {out}", ["--confusion", "conditional"]),
     ("eval-cgail-switch", "eval {cgail} --switch walk nosuch -k 1 -o {out}", ["nosuch"]),
+    ("eval-cgail-switch-matrix", "eval {amp} --switch-matrix -k 1 -o {out}", ["--switch-matrix", "conditional"]),
     ("eval-cgail-curves", "eval {cgail} --curves --checkpoint nosuch.pt -o {out}", ["nosuch.pt"]),
     ("eval-cgail-survival", "eval {cgail} --survival 1 --switch walk nosuch -k 1 -o {out}", ["nosuch"]),
     ("eval-cgail-fidelity", "eval {cgail} --fidelity -k 1 -o {out} device=tpu", ["tpu"]),

@@ -43,6 +43,11 @@ EXPERIMENT = Experiment(
         Option("dtw", "DTW pose error against the reference clips (Table 6.1)", mode=True),
         Option("confusion", "classifier confusion matrix (Fig 6.8)", mode=True),
         Option("switch", "command switch study A -> B (Fig 6.10/6.11)", str, nargs=2, mode=True),
+        Option(
+            "switch_matrix",
+            "the switch study with the ramp for every ordered pair of the run's skills: one table and a picture",
+            mode=True,
+        ),
         Option("curves", "training-curve figures from TensorBoard logs", mode=True),
         Option(
             "survival", "share of SECONDS-long episodes without a fall, per skill", float, mode=True, metavar="SECONDS"

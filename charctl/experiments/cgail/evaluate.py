@@ -23,6 +23,7 @@ from charctl.errors import CharctlError
 from charctl.experiments.cgail.metrics import (
     PERFORM_SECONDS,
     PERFORM_SHARE,
+    PERFORM_SPEED_RANGE,
     confusion_matrices,
     dtw_table,
     survival_table,
@@ -37,6 +38,7 @@ from charctl.experiments.cgail.report import (
     write_dtw,
     write_survival,
     write_switch,
+    write_switch_matrix,
 )
 from charctl.experiments.cgail.rollouts import (
     DeviceRun,
@@ -52,6 +54,7 @@ __all__ = [
     "eval_dtw",
     "eval_survival",
     "eval_switch",
+    "eval_switch_matrix",
     "evaluate",
 ]
 
@@ -89,25 +92,60 @@ def eval_switch(
     if not tr.agent.conditional:
         raise CharctlError(f"{tr.run_dir} is an AMP run: it takes no command, so --switch does not apply")
     ka, kb = tr.skill_index(a), tr.skill_index(b)
+    frames = switch_frames(tr, before_s, after_s)
+    curves, summary = {}, {}
+    for name, ramp in (("ramp", frames["ramp_frames"]), ("no_ramp", 0)):
+        rec = _switch_recording(tr, ka, kb, trials, ramp, frames)
+        summary[name] = switch_summary(tr, kb, rec, frames["switch_frame"], ramp, trials)
+        curves[name] = switch_curves(rec)
+    return write_switch(out, tr, a, b, ka, kb, summary, curves, frames)
+
+
+@torch.no_grad()
+def eval_switch_matrix(tr: DeviceRun, trials: int, out: Path, before_s: float = 1.0, after_s: float = 3.0) -> dict:
+    """The switch study with the ramp for every ordered pair A -> B of the run's skills (`eval_switch`'s rollouts and
+    `performed` rule, watched `after_s` after the ramp and judged over all of it, where `--switch` judges the first
+    `PERFORM_SECONDS`): switch_matrix.json, switch_matrix.png and a report section. The targets' walk -> kick
+    alone misses a policy that cannot leave the kick or enter it from the run (docs/cgail.md, "The late-switch
+    command at seeds 1 and 2")."""
+    if not tr.agent.conditional:
+        raise CharctlError(f"{tr.run_dir} is an AMP run: it takes no command, so --switch-matrix does not apply")
+    frames = switch_frames(tr, before_s, after_s, perform_seconds=None)
+    names = tr.skill_names
+    cells = {}
+    t_switch, ramp = frames["switch_frame"], frames["ramp_frames"]
+    for ka, kb in ((i, j) for i in range(len(names)) for j in range(len(names)) if i != j):
+        rec = _switch_recording(tr, ka, kb, trials, ramp, frames)
+        cells[(names[ka], names[kb])] = switch_summary(tr, kb, rec, t_switch, ramp, trials)
+    return write_switch_matrix(out, tr, cells, frames)
+
+
+def switch_frames(
+    tr: DeviceRun, before_s: float, after_s: float, perform_seconds: float | None = PERFORM_SECONDS
+) -> dict:
+    """The switch study's timing in control frames: the switch after `before_s` of A, the run's command ramp, the
+    end `after_s` after the ramp; and the rules of `metrics.performed_after_switch`: the window after the switch
+    (`perform_seconds`; None: to the end), the foot-peak share and the speed range."""
     hz = tr.cfg.env.control_hz
     ramp_frames = int(tr.cfg.env.ramp_frames) or 60
     t_switch = int(before_s * hz)
     t_end = t_switch + ramp_frames + int(after_s * hz)
-    curves, summary = {}, {}
-    for name, ramp in (("ramp", ramp_frames), ("no_ramp", 0)):
-        rec = switch_rollout(tr, ka, kb, trials, ramp, t_switch, t_end, int(PERFORM_SECONDS * hz))
-        summary[name] = switch_summary(tr, kb, rec, t_switch, ramp, trials)
-        curves[name] = switch_curves(rec)
-    frames = {
+    return {
         "switch_frame": t_switch,
         "end_frame": t_end,
         "ramp_frames": ramp_frames,
         "before_s": before_s,
         "after_s": after_s,
-        "perform_seconds": PERFORM_SECONDS,
+        "perform_seconds": (t_end - t_switch) / hz if perform_seconds is None else perform_seconds,
         "perform_share": PERFORM_SHARE,
+        "perform_speed_range": list(PERFORM_SPEED_RANGE),
     }
-    return write_switch(out, tr, a, b, ka, kb, summary, curves, frames)
+
+
+def _switch_recording(tr: DeviceRun, ka: int, kb: int, trials: int, ramp: int, frames: dict):
+    hz = tr.cfg.env.control_hz
+    t_switch, t_end = frames["switch_frame"], frames["end_frame"]
+    return switch_rollout(tr, ka, kb, trials, ramp, t_switch, t_end, int(round(frames["perform_seconds"] * hz)))
 
 
 def eval_curves(run_dirs: list[Path], out: Path) -> dict:
@@ -135,7 +173,7 @@ def evaluate(targets: list[str], options: dict, overrides: list[str]) -> None:
     episodes = int(options["episodes"]) if options.get("episodes") is not None else 4
     if episodes < 1:
         raise CharctlError(f"-k must be >= 1 episode, got {episodes}")
-    needs_policy = any(options.get(m) for m in ("dtw", "confusion", "switch", "survival", "fidelity"))
+    needs_policy = any(options.get(m) for m in ("dtw", "confusion", "switch", "switch_matrix", "survival", "fidelity"))
     runs = [load_eval_run(d, device, checkpoint) for d in run_dirs] if needs_policy else []
     switch_run = check_mode_arguments(runs, options)  # every argument checked before anything is written
     out.mkdir(parents=True, exist_ok=True)
@@ -160,23 +198,26 @@ def evaluate(targets: list[str], options: dict, overrides: list[str]) -> None:
         from charctl.experiments.cgail.fidelity import eval_fidelity
 
         eval_fidelity(runs, episodes, out)
-    if switch_run is not None:
+    if switch_run is not None and options.get("switch"):
         a, b = options["switch"]
         eval_switch(switch_run, a, b, max(episodes, 2), out)
+    if switch_run is not None and options.get("switch_matrix"):
+        eval_switch_matrix(switch_run, max(episodes, 2), out)
     print(f"results in {out}/ (report.md)")
 
 
 def check_mode_arguments(runs: list[DeviceRun], options: dict) -> DeviceRun | None:
     """One-line CharctlError for a mode the loaded runs cannot serve (--confusion / --switch without a
     conditional run, a --switch skill a run does not have), before any output is written. Returns the
-    run --switch studies (the first conditional one), or None without --switch."""
+    run --switch and --switch-matrix study (the first conditional one), or None without either."""
     conditional = next((t for t in runs if t.agent.conditional), None)
     if options.get("confusion") and conditional is None:
         raise CharctlError("--confusion needs a conditional (cGAIL) run")
-    if not options.get("switch"):
+    if not options.get("switch") and not options.get("switch_matrix"):
         return None
     if conditional is None:
-        raise CharctlError("--switch needs a conditional (cGAIL) run")
-    for name in options["switch"]:
+        mode = "--switch" if options.get("switch") else "--switch-matrix"
+        raise CharctlError(f"{mode} needs a conditional (cGAIL) run")
+    for name in options.get("switch") or ():
         conditional.skill_index(name)
     return conditional

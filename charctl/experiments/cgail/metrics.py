@@ -105,6 +105,9 @@ def confusion_matrices(tr: DeviceRun, episodes: int, seed: int) -> tuple[np.ndar
 
 PERFORM_SECONDS = 3.0  # the window after a switch in which the new skill must be seen done (issue 24)
 PERFORM_SHARE = 0.8  # done = the higher foot reaches this share of the clip's highest foot, without a fall
+# a skill with a heading goal (walk, run) is done when its root's mean speed over the last second watched is within
+# this range of shares of its clip's mean speed, without a fall: standing (a kick's guard) and the other gait fail it
+PERFORM_SPEED_RANGE = (0.5, 1.5)
 
 
 def clip_foot_peak(skill) -> float:
@@ -129,20 +132,41 @@ def foot_peaks(pos: np.ndarray, rot: np.ndarray, hz: float, lengths: np.ndarray 
 def performed_after_switch(
     tr: TrainedRun, kb: int, pos: np.ndarray, rot: np.ndarray, alive_hist: np.ndarray, t_switch: int
 ) -> dict:
-    """Whether skill `kb` is seen done in the `PERFORM_SECONDS` after a switch to it: per trial the higher
-    foot's peak height (m) over the frames before any fall, against the clip's. `pos` / `rot` (F, N, 15, ...)
-    world bodies of the F frames after the switch; `alive_hist` (T, N) alive before each step."""
-    clip_peak = clip_foot_peak(tr.agent.skills[kb])
+    """Whether skill `kb` is seen done in the frames after a switch to it, per trial without a fall in them: a
+    skill with a heading goal (walk, run) when the root's mean horizontal speed over the last second of `pos` is
+    within `PERFORM_SPEED_RANGE` x the clip's mean speed; any other skill when the higher foot's peak reaches
+    `PERFORM_SHARE` x the clip's. `pos` / `rot` (F, N, 15, ...) world bodies (y up, the root body first) of the F
+    frames after the switch; `alive_hist` (T, N) alive before each step."""
+    skill = tr.agent.skills[kb]
+    clip_peak = clip_foot_peak(skill)
+    hz = tr.cfg.env.control_hz
     alive_after = alive_hist[t_switch : t_switch + len(pos)].T  # (N, F)
     lengths = np.where(alive_after.all(axis=1), alive_after.shape[1], alive_after.argmin(axis=1))
-    peak = foot_peaks(pos, rot, tr.cfg.env.control_hz, lengths=np.maximum(lengths, 1))
-    ok = (peak >= PERFORM_SHARE * clip_peak) & alive_after.all(axis=1)
+    peak = foot_peaks(pos, rot, hz, lengths=np.maximum(lengths, 1))
+    speed = last_second_speed(pos[:, :, 0], hz)
+    if skill.heading_goal:
+        lo, hi = PERFORM_SPEED_RANGE
+        done = (speed >= lo * skill.mean_speed) & (speed <= hi * skill.mean_speed)
+    else:
+        done = peak >= PERFORM_SHARE * clip_peak
+    ok = done & alive_after.all(axis=1)
     return {
         "foot_peak": peak.tolist(),
         "foot_peak_mean": float(peak.mean()),
         "clip_foot_peak": float(clip_peak),
+        "speed": speed.tolist(),
+        "speed_mean": float(speed.mean()),
+        "clip_speed": float(skill.mean_speed),
+        "rule": "speed" if skill.heading_goal else "foot_peak",
         "performed": int(ok.sum()),
     }
+
+
+def last_second_speed(root: np.ndarray, hz: float) -> np.ndarray:
+    """(N,) mean horizontal speed (m/s) of the root path `root` (F, N, 3; y up) over its last second of frames
+    (all F when shorter): the xz path length over that time."""
+    seg = root[-(int(hz) + 1) :, :, [0, 2]]
+    return np.linalg.norm(np.diff(seg, axis=0), axis=2).sum(axis=0) * hz / max(len(seg) - 1, 1)
 
 
 def switch_summary(tr: TrainedRun, kb: int, rec: SwitchRecording, t_switch: int, ramp: int, trials: int) -> dict:

@@ -131,7 +131,7 @@ def write_switch(out: Path, tr, a: str, b: str, ka: int, kb: int, summary: dict,
             "falls": s["falls"],
             "alive at switch": s["alive_at_switch"],
             peak_col: f"{s['foot_peak_mean']:.2f} ({s['clip_foot_peak']:.2f})",
-            f"performed (peak >= {perform_share:g} clip, no fall)": s["performed"],
+            f"performed (kick: peak >= {perform_share:g} clip; walk/run: speed; no fall)": s["performed"],
             "trials": s["trials"],
         }
         for n, s in summary.items()
@@ -145,6 +145,63 @@ def write_switch(out: Path, tr, a: str, b: str, ka: int, kb: int, summary: dict,
         f"switch at frame {t_switch} ({before_s:.1f} s); ramp = {ramp_frames} frames linear "
         f"(eq 4.10); each trial watched until frame {t_end} ({after_s:.1f} s after the ramp ends); "
         f"latency = frames after the switch until the classifier's P({b}) > 0.5",
+    )
+    return result
+
+
+def write_switch_matrix(out: Path, tr, cells: dict, frames: dict) -> dict:
+    """switch_matrix.json / .png and its report section: per ordered pair (A, B) of `cells` (`switch_summary` dicts,
+    ramp condition) the trials where B is performed, the falls and how many never switched (P(B) > 0.5)."""
+    names = tr.skill_names
+    K = len(names)
+    share = np.full((K, K), np.nan)
+    for (a, b), c in cells.items():
+        share[names.index(a), names.index(b)] = c["performed"] / c["trials"]
+    worst = min(cells.items(), key=lambda kv: kv[1]["performed"] / kv[1]["trials"])
+    result = {
+        "skills": names,
+        "performed_share": [[None if np.isnan(v) else float(v) for v in row] for row in share],
+        "pairs": [{"from": a, "to": b, **c} for (a, b), c in cells.items()],
+        "worst_pair": list(worst[0]),
+        "frames": frames,
+        "run": str(tr.run_dir),
+    }
+    write_json(out / "switch_matrix.json", result)
+    from charctl.viz.plots import new_figure, save_figure
+
+    fig, ax = new_figure(1, 1, figsize=(3 + 0.8 * K, 2.4 + 0.6 * K))
+    ax.imshow(np.nan_to_num(share, nan=1.0), vmin=0, vmax=1, cmap="RdYlGn")
+    ax.set_xticks(range(K), names, rotation=45, ha="right")
+    ax.set_yticks(range(K), names)
+    ax.set_xlabel("to (B)")
+    ax.set_ylabel("from (A)")
+    ax.set_title("switch A -> B with the ramp: share performed")
+    for (a, b), c in cells.items():
+        ax.text(names.index(b), names.index(a), f"{c['performed']}/{c['trials']}", ha="center", va="center", fontsize=8)
+    save_figure(fig, out / "switch_matrix.png")
+    rows = {
+        f"{a} → {b}": {
+            "performed": f"{c['performed']} / {c['trials']}",
+            "never switched": c["never_switched"],
+            "falls": c["falls"],
+            "B's measure (clip)": f"speed {c['speed_mean']:.2f} m/s ({c['clip_speed']:.2f})"
+            if c["rule"] == "speed"
+            else f"foot {c['foot_peak_mean']:.2f} m ({c['clip_foot_peak']:.2f})",
+            "latency (frames)": c["latency_frames_mean"],
+        }
+        for (a, b), c in cells.items()
+    }
+    cols = list(next(iter(rows.values())))
+    print_table("switch matrix (ramp)", rows, cols)
+    append_report(
+        out,
+        "Switch matrix — every ordered pair, with the ramp",
+        markdown_table(rows, cols) + "\n\n![switch matrix](switch_matrix.png)",
+        f"`--switch A B`'s ramp condition watched {frames['perform_seconds']:g} s after the switch (frame "
+        f"{frames['switch_frame']}, ramp {frames['ramp_frames']} frames); performed, without a fall: walk / run (a "
+        f"heading goal) at {frames['perform_speed_range'][0]:g}-{frames['perform_speed_range'][1]:g} x the clip's "
+        f"speed over the last second, any other skill with the higher foot at {frames['perform_share']:g} x the "
+        f"clip's peak; never switched = the classifier's P(B) never > 0.5 while alive",
     )
     return result
 

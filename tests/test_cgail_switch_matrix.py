@@ -1,0 +1,79 @@
+"""`charctl eval RUN --switch-matrix`: the locomotion rule of `performed_after_switch` by hand-built motion, the
+last-second speed by hand values, and the matrix on the shipped three-skill policy against the single `--switch`
+study it extends (same rollouts, a longer window)."""
+
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from conftest import REPO
+
+RUN = REPO / "pretrained/cgail-3skill-fidelity"
+
+
+def test_last_second_speed_is_the_path_length_over_the_last_second():
+    from charctl.experiments.cgail.metrics import last_second_speed
+
+    hz, t = 4.0, np.arange(9) / 4.0  # 2 s at 4 frames a second
+    root = np.zeros((9, 2, 3))
+    root[:, 0, 0] = 2.0 * t  # trial 0: x at 2 m/s throughout
+    root[:, 1, 2] = np.where(t <= 1.0, 3.0 * t, 3.0)  # trial 1: z at 3 m/s, then still for the last second
+    root[:, :, 1] = 0.9 + 0.1 * np.sin(8 * t)[:, None]  # height moves: not counted
+    np.testing.assert_allclose(last_second_speed(root, hz), [2.0, 0.0], atol=1e-12)
+
+
+def test_a_walk_is_done_at_its_clip_speed_not_standing_and_not_running():
+    """Three trials after a switch to walk: the root at the walk clip's mean speed (done), standing (not), at three
+    times that speed (not); the heading-goal rule measures speed, not the feet."""
+    from charctl.experiments.cgail.config import SkillConfig
+    from charctl.experiments.cgail.fidelity import clip_reference
+    from charctl.experiments.cgail.metrics import PERFORM_SPEED_RANGE, performed_after_switch
+    from charctl.experiments.cgail.skills import load_skills
+
+    walk = load_skills([SkillConfig("walk", "walk", heading_goal=True)], 30.0)[0]
+    ref = clip_reference(walk)
+    hz, F = 30.0, 61
+    tr = SimpleNamespace(agent=SimpleNamespace(skills=[walk]), cfg=SimpleNamespace(env=SimpleNamespace(control_hz=hz)))
+    t = np.arange(F) / hz
+    pos = np.repeat(ref.body_pos[:1, None], F, 0).repeat(3, 1)  # (F, 3, 15, 3) the clip's first pose, held
+    for trial, v in enumerate((walk.mean_speed, 0.0, 3.0 * walk.mean_speed)):
+        pos[:, trial, :, 0] += (v * t)[:, None]  # every body carried along x at v
+    rot = np.repeat(ref.body_rot[:1, None], F, 0).repeat(3, 1)
+    out = performed_after_switch(tr, 0, pos, rot, np.ones((F + 5, 3), dtype=bool), t_switch=5)
+    assert out["rule"] == "speed" and out["clip_speed"] == pytest.approx(walk.mean_speed)
+    np.testing.assert_allclose(out["speed"], [walk.mean_speed, 0.0, 3.0 * walk.mean_speed], rtol=1e-9)
+    assert PERFORM_SPEED_RANGE[0] < 1.0 < PERFORM_SPEED_RANGE[1] < 3.0 and out["performed"] == 1
+
+
+def test_the_matrix_extends_the_switch_study_on_the_shipped_policy(tmp_path):
+    import json
+
+    from charctl.commands.evaluate import eval_command
+
+    single, matrix = tmp_path / "single", tmp_path / "matrix"
+    eval_command([str(RUN)], {"switch": ("walk", "right_kick"), "episodes": 2, "out": single})
+    eval_command([str(RUN)], {"switch_matrix": True, "episodes": 2, "out": matrix})
+    result = json.loads((matrix / "switch_matrix.json").read_text())
+    pairs = {(p["from"], p["to"]): p for p in result["pairs"]}
+    assert len(pairs) == 6 and all(0 <= p["performed"] <= p["trials"] == 2 for p in pairs.values())
+    assert {p["rule"] for (a, b), p in pairs.items() if b in ("walk", "run")} == {"speed"}
+    # the same deterministic rollouts watched longer: each trial's kick foot peak is at least the single study's
+    ramp = json.loads((single / "switch_walk_to_right_kick.json").read_text())["summary"]["ramp"]
+    kick = pairs[("walk", "right_kick")]
+    assert np.all(np.array(kick["foot_peak"]) >= np.array(ramp["foot_peak"]) - 1e-9)
+    assert kick["latency_frames"] == ramp["latency_frames"]
+    assert (matrix / "switch_matrix.png").stat().st_size > 5_000
+    assert "Switch matrix" in (matrix / "report.md").read_text()
+
+
+def test_an_amp_run_has_no_switch_matrix(tmp_path):
+    from charctl.commands.evaluate import eval_command
+    from charctl.errors import CharctlError
+
+    out = tmp_path / "amp"
+    with pytest.raises(CharctlError, match="--switch-matrix needs a conditional"):
+        eval_command([str(REPO / "pretrained/amp-walk")], {"switch_matrix": True, "episodes": 2, "out": out})
+    assert not out.exists()
