@@ -5,11 +5,12 @@ horizontal speed, for each ordered pair of the run's skills (or the pairs given)
                                                 [--before 2] [--after 6]
 
 One rollout per pair as `charctl export RUN --commands "A:0,B:BEFORE"` makes it (deterministic mean actions, RSI in
-A's clip at frame 0, the env's command ramp after the switch), the bodies by MuJoCo kinematics of the recorded qpos
-(y-up world, charctl.sim.humanoid). Each row: the seconds after the switch, "foot m / speed m/s" per second, and the
-falls. The policy holding each skill (from its clip's frame 0) is printed first, for scale. A diagnostic for the
-switches the targets do not measure (docs/cgail.md, "The late-switch command at seeds 1 and 2"), not a target:
-`charctl eval RUN --switch A B` is the measured study.
+A's clip at frame 0, the env's command ramp after the switch), the bodies by the shared forward kinematics of the
+recorded qpos (`qpos_to_local_rot` and `motion.fk`, as `--bvh` and the fidelity references; y-up world). Each row:
+the seconds after the switch, "foot m / speed m/s" per second, and the falls. The policy holding each skill (from
+its clip's frame 0) is printed first, for scale. A diagnostic for the switches the targets do not measure
+(docs/cgail.md, "The late-switch command at seeds 1 and 2"), not a target: `charctl eval RUN --switch-matrix` is
+the measured study.
 """
 
 from __future__ import annotations
@@ -17,10 +18,7 @@ from __future__ import annotations
 import argparse
 import itertools
 
-import mujoco
 import numpy as np
-
-FEET = ("right_ankle", "left_ankle")
 
 
 def per_second(values: np.ndarray, hz: float, reduce=np.max) -> np.ndarray:
@@ -38,19 +36,18 @@ def horizontal_speed(qpos: np.ndarray, hz: float) -> np.ndarray:
     return np.linalg.norm(np.diff(starts, axis=0), axis=1)[: (len(qpos) - 1) // n]
 
 
-def foot_heights(model: mujoco.MjModel, qpos: np.ndarray) -> np.ndarray:
+def foot_heights(qpos: np.ndarray, shoulder_frame) -> np.ndarray:
     """(T,) the higher of the two ankle bodies' heights (m, world y) per frame of `qpos` (T, nq)."""
-    data = mujoco.MjData(model)
-    ids = [mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, n) for n in FEET]
-    out = np.empty(len(qpos))
-    for t, q in enumerate(qpos):  # kinematics only, one frame at a time (a diagnostic, not a hot path)
-        data.qpos[:] = q
-        mujoco.mj_kinematics(model, data)
-        out[t] = data.xpos[ids, 1].max()
-    return out
+    from charctl.motion.fk import forward_kinematics
+    from charctl.motion.skeleton import BODY_NAMES, FEET, load_skeleton
+    from charctl.sim.humanoid import qpos_to_local_rot
+
+    root, rot = qpos_to_local_rot(qpos, shoulder_frame)
+    pos, _ = forward_kinematics(load_skeleton(), root, rot)
+    return pos[:, [BODY_NAMES.index(f) for f in FEET], 1].max(axis=1)
 
 
-def transition(tr, model, a: int, b: int, before: float, after: float) -> dict:
+def transition(tr, a: int, b: int, before: float, after: float) -> dict:
     """One rollout: skill `a` from its clip's frame 0, `b` commanded at `before` s, watched `after` s more."""
     from charctl.experiments.cgail.export import schedule_rollout
 
@@ -59,7 +56,7 @@ def transition(tr, model, a: int, b: int, before: float, after: float) -> dict:
     cut = int(round(before * hz))
     tail = qpos[cut:]
     return {
-        "foot": per_second(foot_heights(model, tail), hz),
+        "foot": per_second(foot_heights(tail, tr.cfg.env.shoulder_frame), hz),
         "speed": horizontal_speed(tail, hz),
         "falls": stats["falls"],
     }
@@ -67,7 +64,6 @@ def transition(tr, model, a: int, b: int, before: float, after: float) -> dict:
 
 def main() -> None:
     from charctl.experiments.cgail.policy import load_trained_run
-    from charctl.sim.humanoid import build_mjcf
 
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("run", help="a cgail run folder or pretrained/ policy")
@@ -83,14 +79,12 @@ def main() -> None:
         parser.error(f"--pairs takes A:B of the run's skills ({', '.join(names)}), not: {', '.join(bad)}")
     if args.before <= 0 or args.after < 1:
         parser.error("--before must be > 0 and --after >= 1 (seconds)")
-    e = tr.cfg.env
-    model = mujoco.MjModel.from_xml_string(build_mjcf(e.physics_hz, 1.0, e.armature))
     print(f"{args.run}: B commanded {args.before:g} s after A's clip frame 0; per second after: foot m / speed m/s")
     for name in names:  # the skill held: what B looks like when done
-        held = transition(tr, model, names.index(name), names.index(name), 1.0, 3.0)
+        held = transition(tr, names.index(name), names.index(name), 1.0, 3.0)
         print(f"  {name} held: " + " ".join(f"{f:.2f}/{s:.2f}" for f, s in zip(held["foot"], held["speed"])))
     for a, b in pairs:
-        res = transition(tr, model, names.index(a), names.index(b), args.before, args.after)
+        res = transition(tr, names.index(a), names.index(b), args.before, args.after)
         cells = " ".join(f"{f:.2f}/{s:.2f}" for f, s in zip(res["foot"], res["speed"]))
         print(f"  {a} -> {b}: {cells}  falls {res['falls']}")
 

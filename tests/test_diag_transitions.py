@@ -6,7 +6,6 @@ from __future__ import annotations
 import subprocess
 import sys
 
-import mujoco
 import numpy as np
 
 from conftest import REPO, load_script
@@ -33,14 +32,11 @@ def test_horizontal_speed_ignores_height_and_counts_second_to_second():
 
 def test_walk_to_kick_on_the_shipped_policy():
     from charctl.experiments.cgail.policy import load_trained_run
-    from charctl.sim.humanoid import build_mjcf
 
     mod = load_script("diag_transitions")
     tr = load_trained_run(RUN)
-    e = tr.cfg.env
-    model = mujoco.MjModel.from_xml_string(build_mjcf(e.physics_hz, 1.0, e.armature))
     names = tr.skill_names
-    res = mod.transition(tr, model, names.index("walk"), names.index("right_kick"), 1.0, 4.0)
+    res = mod.transition(tr, names.index("walk"), names.index("right_kick"), 1.0, 4.0)
     assert res["falls"] == 0 and len(res["foot"]) == len(res["speed"]) == 4
     assert res["foot"][0] < 0.5 and 0.8 < res["speed"][0] < 1.8  # still walking while the ramp starts
     assert res["foot"][2:].max() > 1.0  # the kick after the 2-s ramp (clip 1.28 m)

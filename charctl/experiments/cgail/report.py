@@ -167,11 +167,11 @@ def write_switch_matrix(out: Path, tr, cells: dict, frames: dict) -> dict:
         "run": str(tr.run_dir),
     }
     write_json(out / "switch_matrix.json", result)
+    import matplotlib
+
     from charctl.viz.plots import new_figure, save_figure
 
     fig, ax = new_figure(1, 1, figsize=(3 + 0.8 * K, 2.4 + 0.6 * K))
-    import matplotlib
-
     cmap = matplotlib.colormaps["RdYlGn"].with_extremes(bad="lightgray")  # the diagonal: no switch
     ax.imshow(np.ma.masked_invalid(share), vmin=0, vmax=1, cmap=cmap)
     ax.set_xticks(range(K), names, rotation=45, ha="right")
