@@ -327,3 +327,13 @@ repro-cgail-spindance-probes: install ## cgail: spindance alone, tracking + pose
 	$(CHARCTL) train cgail "use_skills=[spindance]" reward.w_style=0 train.total_samples=6000000 train.fidelity_every=1000000 seed=1 output_root=$(CGAIL_FID)/spindance/recipe-nostyle
 	$(CHARCTL) train cgail "use_skills=[spindance]" reward.w_track=4.0 train.total_samples=6000000 train.fidelity_every=1000000 seed=1 output_root=$(CGAIL_FID)/spindance/recipe-track4
 	for d in tracking-term recipe recipe-nostyle recipe-track4; do T=$$(ls -d $(CGAIL_FID)/spindance/$$d/cgail/*/ | tail -1); $(CHARCTL) eval $$T --fidelity -k 4 || exit 1; done
+
+# The ready start (docs/cgail.md, "A ready start"): run H's command plus the moving walk reference (which learned the
+# walk at both seeds and lost the kick's second pass at both) and env.ready_radius=0.3: a kick reference that restarts
+# at frame 0 (its next pass, or a ramp into it) waits up to env.ready_wait_steps (1 s) for the character to come within
+# 0.3 m of the clip's first pose. Evaluated with every ordered switch (--switch-matrix). Started 2026-12-06 at seed 2.
+.PHONY: repro-cgail-3skill-ready
+repro-cgail-3skill-ready: install ## cgail: run H's command with reward.goal_reference_window=3 and env.ready_radius=0.3 at seed CGAIL_SEED (4e7 samples; ~75 min on 2 cores), evaluated with the switch matrix
+	$(CHARCTL) train cgail reward.goal_reference_window=3 env.ready_radius=0.3 train.total_samples=$(CGAIL_FID_SAMPLES) train.checkpoint_every=20 train.keep_checkpoint_every=2500000 seed=$(CGAIL_SEED) output_root=$(CGAIL_FID)/ready-seed$(CGAIL_SEED)
+	O=$$(ls -d $(CGAIL_FID)/ready-seed$(CGAIL_SEED)/cgail/*/ | tail -1); \
+	$(call cgail-evaluate,$$O) && $(CHARCTL) eval $$O --switch-matrix -k 8 -o $$O/eval/matrix

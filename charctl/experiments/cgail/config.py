@@ -128,6 +128,16 @@ class EnvConfig:
     # 4e7, the walk -> kick switch 32 of 32 with the ramp; not in the small preset until seed 2 passes too
     # (docs/cgail.md, "More switches once the way back is on").
     switch_prob_after_returns: float = ranged(0.0, ge=0, le=1)
+    # A ready start for the timed reference (skills without a heading goal): where it restarts at frame 0 (a clip's
+    # next pass, or the end of a command ramp into the skill) it holds frame 0 until the character's pose is within
+    # this many metres of it (`rules.reference_pose_error`: hands, feet and root height against the clip's first
+    # frame) or env.ready_wait_steps have passed, then runs; while it holds, the phase shows frame 0 and the pose
+    # check waits (its grace steps start when the clip does). So a kick commanded from the run starts once the
+    # character is in its guard instead of at a fixed time after the ramp, and a second pass starts from the
+    # policy's own guard when it reaches it. A rule of the env, so evaluations use it too. 0 = off (the clip restarts
+    # on time, as every run before 2026-12-07). docs/cgail.md, "A ready start".
+    ready_radius: float = ranged(0.0, ge=0)
+    ready_wait_steps: int = ranged(30, ge=1)  # control steps (1 s at 30 Hz) the reference waits at most
     action_scale: float = ranged(1.0, gt=0)  # PD target (rad) = rest pose + action_scale * action
     fall_tolerance: float = ranged(0.005, ge=0)  # m: a non-foot body this close to the ground ends the episode (a fall)
     goal_max_angle_deg: float = 45.0  # new heading goals lie within +- this angle of the current heading
@@ -442,6 +452,11 @@ def _check_env(cfg) -> str | None:
                 "env.own_start_weight > 0 needs a reference that restarts at frame 0: reward.kind=adversarial with "
                 "env.phase_obs=true or reward.pose_error_threshold > 0, and reward.pose_error_grace_steps >= 1"
             )
+    if env.ready_radius > 0 and (cfg.reward.kind != "adversarial" or not timed):
+        return (
+            "env.ready_radius holds a timed reference that restarts at frame 0: reward.kind=adversarial with "
+            "env.phase_obs=true or reward.pose_error_threshold > 0"
+        )
     return None
 
 

@@ -90,6 +90,11 @@ def site_meta(tr, model, checkpoint: str | None) -> dict:
 
     skel = load_skeleton()
     env = tr.cfg.env
+    if float(getattr(env, "ready_radius", 0.0)) > 0:
+        raise CharctlError(
+            f"{tr.run_dir} was trained with env.ready_radius (the reference waits for the character), which the web "
+            "demo's phase (web/sim.js) does not implement"
+        )
     keys = [str((i + 1) % 10) for i in range(min(10, len(tr.skill_names)))]
     return {
         "format": 1,
