@@ -308,9 +308,7 @@ def restart_after_ramp(
     )
 
 
-def hold_reference(
-    frame: Array, advanced: Array, restarted: Array, ref_wait: Array
-) -> tuple[Array, Array]:
+def hold_reference(frame: Array, advanced: Array, restarted: Array, ref_wait: Array) -> tuple[Array, Array]:
     """env.ready_radius: (frame, restarted), both (N,), after one step of `advance_reference` (`advanced`,
     `restarted`) from `frame`: an env whose reference waits (`ref_wait` > 0 control steps left) keeps its frame
     (frame 0) and does not restart; the others take the step."""
