@@ -59,7 +59,7 @@ def test_the_matrix_extends_the_switch_study_on_the_shipped_policy(tmp_path):
     result = json.loads((matrix / "switch_matrix.json").read_text())
     pairs = {(p["from"], p["to"]): p for p in result["pairs"]}
     assert len(pairs) == 6 and all(0 <= p["performed"] <= p["trials"] == 2 for p in pairs.values())
-    assert {p["rule"] for (a, b), p in pairs.items() if b in ("walk", "run")} == {"speed"}
+    assert {p["rule"] for (a, b), p in pairs.items() if b in ("walk", "run")} == {"speed+coverage"}
     # the same deterministic rollouts watched longer: each trial's kick foot peak is at least the single study's
     ramp = json.loads((single / "switch_walk_to_right_kick.json").read_text())["summary"]["ramp"]
     kick = pairs[("walk", "right_kick")]
@@ -77,3 +77,32 @@ def test_an_amp_run_has_no_switch_matrix(tmp_path):
     with pytest.raises(CharctlError, match="--switch-matrix needs a conditional"):
         eval_command([str(REPO / "pretrained/amp-walk")], {"switch_matrix": True, "episodes": 2, "out": out})
     assert not out.exists()
+
+
+def test_the_matrix_rule_asks_for_the_clips_poses_not_only_the_foot():
+    """Three trials after a switch to the kick, judged from frame 0: the clip replayed (coverage 1, done), the clip
+    with every foot and ankle body lifted 0.3 m (the foot rule met, no clip frame within 15 cm: not done), the first
+    pose held (neither). Without `coverage_from` the lifted foot counts as done: the foot rule alone."""
+    from charctl.experiments.cgail.config import SkillConfig
+    from charctl.experiments.cgail.fidelity import clip_reference
+    from charctl.experiments.cgail.metrics import PERFORM_COVERAGE, performed_after_switch
+    from charctl.experiments.cgail.skills import load_skills
+    from charctl.motion.skeleton import load_skeleton
+
+    kick = load_skills([SkillConfig("right_kick", "kick")], 30.0)[0]
+    ref = clip_reference(kick)
+    tr = SimpleNamespace(
+        agent=SimpleNamespace(skills=[kick]), cfg=SimpleNamespace(env=SimpleNamespace(control_hz=30.0))
+    )
+    F = len(ref.body_pos)
+    lifted = ref.body_pos.copy()
+    feet = [i for i, n in enumerate(load_skeleton().names) if "ankle" in n or "foot" in n]
+    lifted[:, feet, 1] += 0.3
+    pos = np.stack([ref.body_pos, lifted, np.repeat(ref.body_pos[:1], F, 0)], axis=1)  # (F, 3, 15, 3)
+    rot = np.stack([ref.body_rot] * 2 + [np.repeat(ref.body_rot[:1], F, 0)], axis=1)
+    alive = np.ones((F + 5, 3), dtype=bool)
+    out = performed_after_switch(tr, 0, pos, rot, alive, t_switch=5, coverage_from=0)
+    assert out["coverage"][0] == pytest.approx(1.0) and out["coverage"][1] == 0.0
+    assert out["coverage"][2] < PERFORM_COVERAGE and out["rule"] == "foot_peak+coverage"
+    assert out["performed"] == 1
+    assert performed_after_switch(tr, 0, pos, rot, alive, t_switch=5)["performed"] == 2

@@ -21,6 +21,7 @@ import torch
 from charctl.checkpoints import checkpoint_file_name
 from charctl.errors import CharctlError
 from charctl.experiments.cgail.metrics import (
+    PERFORM_COVERAGE,
     PERFORM_SECONDS,
     PERFORM_SHARE,
     PERFORM_SPEED_RANGE,
@@ -116,7 +117,7 @@ def eval_switch_matrix(tr: DeviceRun, trials: int, out: Path, before_s: float = 
     t_switch, ramp = frames["switch_frame"], frames["ramp_frames"]
     for ka, kb in ((i, j) for i in range(len(names)) for j in range(len(names)) if i != j):
         rec = _switch_recording(tr, ka, kb, trials, ramp, frames)
-        cells[(names[ka], names[kb])] = switch_summary(tr, kb, rec, t_switch, ramp, trials)
+        cells[(names[ka], names[kb])] = switch_summary(tr, kb, rec, t_switch, ramp, trials, coverage_from=ramp)
     return write_switch_matrix(out, tr, cells, frames)
 
 
@@ -139,6 +140,7 @@ def switch_frames(
         "perform_seconds": (t_end - t_switch) / hz if perform_seconds is None else perform_seconds,
         "perform_share": PERFORM_SHARE,
         "perform_speed_range": list(PERFORM_SPEED_RANGE),
+        "perform_coverage": PERFORM_COVERAGE,  # the switch matrix only
     }
 
 

@@ -108,6 +108,10 @@ PERFORM_SHARE = 0.8  # done = the higher foot reaches this share of the clip's h
 # a skill with a heading goal (walk, run) is done when its root's mean speed over the last second watched is within
 # this range of shares of its clip's mean speed, without a fall: standing (a kick's guard) and the other gait fail it
 PERFORM_SPEED_RANGE = (0.5, 1.5)
+# the switch matrix also asks for the clip's poses: B is done only where the frames after the ramp cover at least this
+# share of B's clip frames (the fidelity evaluation's pose coverage, 15 cm at every body). The foot rule alone is met
+# by a knee-up for the kick and by nothing at all for a punch, the jump or a dance (their feet stay low).
+PERFORM_COVERAGE = 0.5
 
 
 def clip_foot_peak(skill) -> float:
@@ -130,13 +134,21 @@ def foot_peaks(pos: np.ndarray, rot: np.ndarray, hz: float, lengths: np.ndarray 
 
 
 def performed_after_switch(
-    tr: TrainedRun, kb: int, pos: np.ndarray, rot: np.ndarray, alive_hist: np.ndarray, t_switch: int
+    tr: TrainedRun,
+    kb: int,
+    pos: np.ndarray,
+    rot: np.ndarray,
+    alive_hist: np.ndarray,
+    t_switch: int,
+    coverage_from: int | None = None,
 ) -> dict:
     """Whether skill `kb` is seen done in the frames after a switch to it, per trial without a fall in them: a
     skill with a heading goal (walk, run) when the root's mean horizontal speed over the last second of `pos` is
     within `PERFORM_SPEED_RANGE` x the clip's mean speed; any other skill when the higher foot's peak reaches
-    `PERFORM_SHARE` x the clip's. `pos` / `rot` (F, N, 15, ...) world bodies (y up, the root body first) of the F
-    frames after the switch; `alive_hist` (T, N) alive before each step."""
+    `PERFORM_SHARE` x the clip's. With `coverage_from` (the switch matrix: the ramp's frames) also, for every skill,
+    when the frames from that one on cover at least `PERFORM_COVERAGE` of the clip (`switch_coverage`). `pos` /
+    `rot` (F, N, 15, ...) world bodies (y up, the root body first) of the F frames after the switch; `alive_hist`
+    (T, N) alive before each step."""
     skill = tr.agent.skills[kb]
     clip_peak = clip_foot_peak(skill)
     hz = tr.cfg.env.control_hz
@@ -149,17 +161,39 @@ def performed_after_switch(
         done = (speed >= lo * skill.mean_speed) & (speed <= hi * skill.mean_speed)
     else:
         done = peak >= PERFORM_SHARE * clip_peak
+    coverage = None
+    if coverage_from is not None:
+        coverage = switch_coverage(skill, pos, rot, coverage_from, lengths)
+        done = done & (coverage >= PERFORM_COVERAGE)
     ok = done & alive_after.all(axis=1)
     return {
+        "coverage": None if coverage is None else coverage.tolist(),
+        "coverage_mean": None if coverage is None else float(coverage.mean()),
         "foot_peak": peak.tolist(),
         "foot_peak_mean": float(peak.mean()),
         "clip_foot_peak": float(clip_peak),
         "speed": speed.tolist(),
         "speed_mean": float(speed.mean()),
         "clip_speed": float(skill.mean_speed),
-        "rule": "speed" if skill.heading_goal else "foot_peak",
+        "rule": ("speed" if skill.heading_goal else "foot_peak") + ("+coverage" if coverage_from is not None else ""),
         "performed": int(ok.sum()),
     }
+
+
+def switch_coverage(skill, pos: np.ndarray, rot: np.ndarray, start: int, lengths: np.ndarray) -> np.ndarray:
+    """(N,) per trial, the pose coverage of `skill`'s clip (a `SkillData`; the fidelity evaluation's: the share of
+    its frames some recorded frame matches within 15 cm at every body, root-relative in the heading frame) by the
+    frames `start` to `lengths` (N,) of `pos` / `rot` (F, N, 15, ...) world bodies; 0 where none are left."""
+    from charctl.eval.fidelity import COVERAGE_TOL, frame_match, heading_positions
+    from charctl.experiments.cgail.fidelity import clip_reference
+
+    clip = clip_reference(skill).rel
+    rel = heading_positions(pos, rot[:, :, 0])  # (F, N, 15, 3)
+    out = np.zeros(pos.shape[1])
+    for i, n in enumerate(lengths):  # one DTW-free match per trial (F x m x 15 distances)
+        if n > start:
+            out[i] = float(np.mean(frame_match(rel[start:n, i], clip)[0] <= COVERAGE_TOL))
+    return out
 
 
 def last_second_speed(root: np.ndarray, hz: float) -> np.ndarray:
@@ -169,9 +203,17 @@ def last_second_speed(root: np.ndarray, hz: float) -> np.ndarray:
     return np.linalg.norm(np.diff(seg, axis=0), axis=2).sum(axis=0) * hz / max(len(seg) - 1, 1)
 
 
-def switch_summary(tr: TrainedRun, kb: int, rec: SwitchRecording, t_switch: int, ramp: int, trials: int) -> dict:
+def switch_summary(
+    tr: TrainedRun,
+    kb: int,
+    rec: SwitchRecording,
+    t_switch: int,
+    ramp: int,
+    trials: int,
+    coverage_from: int | None = None,
+) -> dict:
     """One condition of the switch study: latency until P(B) > 0.5 per trial alive at the switch, falls,
-    and whether B is seen done (`performed_after_switch`)."""
+    and whether B is seen done (`performed_after_switch`, with `coverage_from` its pose-coverage rule)."""
     live = rec.alive_hist
     pb = rec.probs[t_switch:, :, kb]
     up = live[t_switch:]  # alive before the step: frames after a fall (and its reset) do not count
@@ -182,7 +224,7 @@ def switch_summary(tr: TrainedRun, kb: int, rec: SwitchRecording, t_switch: int,
     lat_ok = [x for x in latency if x is not None]
     falls = int((~rec.alive).sum())
     return {
-        **performed_after_switch(tr, kb, rec.pos_after, rec.rot_after, rec.alive_hist, t_switch),
+        **performed_after_switch(tr, kb, rec.pos_after, rec.rot_after, rec.alive_hist, t_switch, coverage_from),
         "ramp_frames": ramp,
         "alive_at_switch": int(rec.alive_at_switch.sum()),
         "latency_frames_mean": float(np.mean(lat_ok)) if lat_ok else None,

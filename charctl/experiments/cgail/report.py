@@ -188,8 +188,9 @@ def write_switch_matrix(out: Path, tr, cells: dict, frames: dict) -> dict:
             "never switched": c["never_switched"],
             "falls": c["falls"],
             "B's measure (clip)": f"speed {c['speed_mean']:.2f} m/s ({c['clip_speed']:.2f})"
-            if c["rule"] == "speed"
+            if c["rule"].startswith("speed")
             else f"foot {c['foot_peak_mean']:.2f} m ({c['clip_foot_peak']:.2f})",
+            "coverage after the ramp": c["coverage_mean"],
             "latency (frames)": c["latency_frames_mean"],
         }
         for (a, b), c in cells.items()
@@ -204,7 +205,9 @@ def write_switch_matrix(out: Path, tr, cells: dict, frames: dict) -> dict:
         f"{frames['switch_frame']}, ramp {frames['ramp_frames']} frames); performed, without a fall: walk / run (a "
         f"heading goal) at {frames['perform_speed_range'][0]:g}-{frames['perform_speed_range'][1]:g} x the clip's "
         f"speed over the last second, any other skill with the higher foot at {frames['perform_share']:g} x the "
-        f"clip's peak; never switched = the classifier's P(B) never > 0.5 while alive",
+        f"clip's peak, and for every skill the frames after the ramp covering at least "
+        f"{frames['perform_coverage']:g} of B's clip (pose coverage, 15 cm at every body); never switched = the "
+        "classifier's P(B) never > 0.5 while alive",
     )
     return result
 
