@@ -331,7 +331,8 @@ repro-cgail-spindance-probes: install ## cgail: spindance alone, tracking + pose
 # The ready start (docs/cgail.md, "A ready start"): run H's command plus the moving walk reference (which learned the
 # walk at both seeds and lost the kick's second pass at both) and env.ready_radius=0.3: a kick reference that restarts
 # at frame 0 (its next pass, or a ramp into it) waits up to env.ready_wait_steps (1 s) for the character to come within
-# 0.3 m of the clip's first pose. Evaluated with every ordered switch (--switch-matrix). Started 2026-12-06 at seed 2.
+# 0.3 m of the clip's first pose. Evaluated with every ordered switch (--switch-matrix). Run 2026-12-06 at seed 2: walk
+# and run learned, the kick not by 4e7, no switch of the matrix performed; not adopted.
 .PHONY: repro-cgail-3skill-ready
 repro-cgail-3skill-ready: install ## cgail: run H's command with reward.goal_reference_window=3 and env.ready_radius=0.3 at seed CGAIL_SEED (4e7 samples; ~75 min on 2 cores), evaluated with the switch matrix
 	$(CHARCTL) train cgail reward.goal_reference_window=3 env.ready_radius=0.3 train.total_samples=$(CGAIL_FID_SAMPLES) train.checkpoint_every=20 train.keep_checkpoint_every=2500000 seed=$(CGAIL_SEED) output_root=$(CGAIL_FID)/ready-seed$(CGAIL_SEED)

@@ -135,7 +135,10 @@ class EnvConfig:
     # check waits (its grace steps start when the clip does). So a kick commanded from the run starts once the
     # character is in its guard instead of at a fixed time after the ramp, and a second pass starts from the
     # policy's own guard when it reaches it. A rule of the env, so evaluations use it too. 0 = off (the clip restarts
-    # on time, as every run before 2026-12-07). docs/cgail.md, "A ready start".
+    # on time, as in every run before this key, 2026-12-06). 0.3 as 5e6 samples on the late-switch seed-2 run: the
+    # kick's passes and the walk -> kick switch from the policy's own guard, but then it stands in the guard when told
+    # to run; 0.3 from scratch at seed 2 (make repro-cgail-3skill-ready): no kick by 4e7. Not in the small preset.
+    # docs/cgail.md, "A ready start".
     ready_radius: float = ranged(0.0, ge=0)
     ready_wait_steps: int = ranged(30, ge=1)  # control steps (1 s at 30 Hz) the reference waits at most
     action_scale: float = ranged(1.0, gt=0)  # PD target (rad) = rest pose + action_scale * action
