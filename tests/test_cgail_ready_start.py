@@ -132,3 +132,26 @@ def test_smoke_training_with_a_ready_start(tmp_path, charctl_main):
     scalars = read_scalars(run / "tb")
     share = scalars["train/ready_timeout_share"][1]
     assert ((share >= 0) & (share <= 1)).all() and "train/ready_starts" in scalars
+
+
+def test_without_the_wait_after_a_pass_only_a_ramp_into_the_kick_waits():
+    """env.ready_after_pass=false: the kick's next pass restarts on time; a walk -> kick switch (ramp of 2 frames)
+    holds the kick's frame 0 for the 4 waiting steps after the ramp's end, then runs."""
+    skills = load_skills([SkillConfig("walk", "walk", heading_goal=True), SkillConfig("kick", "kick")], 30.0)
+    cfg = OmegaConf.structured(
+        EnvConfig(
+            num_envs=2, switch_prob=0.0, ready_radius=1e-9, ready_wait_steps=4, ready_after_pass=False, ramp_frames=2
+        )
+    )
+    env = CgailEnv(skills, cfg, seed=0, pose_error_threshold=100.0, pose_error_grace_steps=3)
+    zeros = np.zeros((2, env.sim.layout.nu))
+    last = len(skills[1].obs) - 1
+    env.cmd[:], env.prev_cmd[:], env.ref_frame[:] = 1, 1, last - 1  # both envs in the kick, a step before its end
+    assert [f[0] for f in _frames(env, 4, zeros)] == [last, 0, 1, 2]  # the next pass: on time
+    env.set_command(np.arange(2), 0)  # to the walk (2-frame ramp) and back to the kick
+    _frames(env, 3, zeros)
+    env.set_command(np.arange(2), 1)
+    frames = [f[0] for f in _frames(env, 10, zeros)]
+    first = frames.index(0)
+    # the ramp's end sets frame 0 after its step's check, so the 4 waiting steps follow that frame: five at frame 0
+    assert frames[first : first + 7] == [0, 0, 0, 0, 0, 1, 2], frames

@@ -109,6 +109,7 @@ class CgailEnv:
         # env.ready_wait_steps); 0 = it runs on time
         self.ready_radius = float(getattr(env_cfg, "ready_radius", 0.0)) if self.timed_reference else 0.0
         self.ready_wait = int(getattr(env_cfg, "ready_wait_steps", 30))
+        self.ready_after_pass = bool(getattr(env_cfg, "ready_after_pass", True))  # false: only after a ramp
         self.conditional = conditional
         self.K = len(skills)
         self.N = int(env_cfg.num_envs)
@@ -331,7 +332,8 @@ class CgailEnv:
             held = self.ref_grace
             self.ref_grace = count_down_grace(self.ref_grace, again, self.pose_grace)
             self.ref_grace = namespace(held).where(self.ref_wait > 0, held, self.ref_grace)
-            self.ref_wait = start_waiting(self.ref_wait, again, self.has_goal[cmd], self.ready_wait)
+            if self.ready_after_pass:
+                self.ref_wait = start_waiting(self.ref_wait, again, self.has_goal[cmd], self.ready_wait)
         elif restart:
             self.ref_grace = count_down_grace(self.ref_grace, again, self.pose_grace)
         return self._reference_obs(), ended
