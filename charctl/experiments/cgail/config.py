@@ -143,7 +143,8 @@ class EnvConfig:
     ready_wait_steps: int = ranged(30, ge=1)  # control steps (1 s at 30 Hz) the reference waits at most
     # With env.ready_radius: false = the reference waits only where a command ramp into the skill ends (a switch); a
     # pass that ends restarts on time, as without the radius. After every pass the late-switch run's character learned
-    # to stand in the clip's first pose and not to leave it for the run (docs/cgail.md, "A ready start").
+    # to stand in the clip's first pose and not to leave it for the run; a plain continuation did too, and false kept
+    # the kick -> run switch (7 of 8) in a 5e6-sample continuation at seed 2 (docs/cgail.md, "A ready start").
     ready_after_pass: bool = True
     action_scale: float = ranged(1.0, gt=0)  # PD target (rad) = rest pose + action_scale * action
     fall_tolerance: float = ranged(0.005, ge=0)  # m: a non-foot body this close to the ground ends the episode (a fall)
