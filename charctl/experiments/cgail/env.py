@@ -327,15 +327,14 @@ class CgailEnv:
         cmd = self.cmd
         frame = self.ref_frame
         self.ref_frame, ended, again = advance_reference(frame, self.clip_loops[cmd], self.clip_frames[cmd], restart)
-        if restart and self.ready_radius > 0:  # a waiting reference holds frame 0 and its grace steps
-            self.ref_frame, again = hold_reference(frame, self.ref_frame, again, self.ref_wait)
-            held = self.ref_grace
-            self.ref_grace = count_down_grace(self.ref_grace, again, self.pose_grace)
-            self.ref_grace = namespace(held).where(self.ref_wait > 0, held, self.ref_grace)
-            if self.ready_after_pass:
+        if restart:
+            held = None
+            if self.ready_radius > 0:  # a waiting reference holds frame 0 and its grace steps
+                held = self.ref_wait > 0
+                self.ref_frame, again = hold_reference(frame, self.ref_frame, again, self.ref_wait)
+            self.ref_grace = count_down_grace(self.ref_grace, again, self.pose_grace, held)
+            if self.ready_radius > 0 and self.ready_after_pass:
                 self.ref_wait = start_waiting(self.ref_wait, again, self.has_goal[cmd], self.ready_wait)
-        elif restart:
-            self.ref_grace = count_down_grace(self.ref_grace, again, self.pose_grace)
         return self._reference_obs(), ended
 
     def _reference_obs(self, frames=None):

@@ -342,11 +342,13 @@ def ready_update(
     return left, xp.where(start, xp.full_like(ref_grace, grace), ref_grace)
 
 
-def count_down_grace(ref_grace: Array, restarted: Array, grace: int) -> Array:
+def count_down_grace(ref_grace: Array, restarted: Array, grace: int, held: Array | None = None) -> Array:
     """(N,) control steps left without a pose-error check after one step of the timed reference: `grace` where
-    the clip has just restarted at frame 0 (`restarted`, from `advance_reference`), else one fewer (not below 0)."""
+    the clip has just restarted at frame 0 (`restarted`, from `advance_reference`), unchanged where `held` (a
+    reference waiting at frame 0, env.ready_radius), else one fewer (not below 0)."""
     xp = namespace(ref_grace, restarted)
-    return xp.where(restarted, xp.full_like(ref_grace, grace), xp.maximum(ref_grace - 1, xp.zeros_like(ref_grace)))
+    out = xp.where(restarted, xp.full_like(ref_grace, grace), xp.maximum(ref_grace - 1, xp.zeros_like(ref_grace)))
+    return out if held is None else xp.where(held, ref_grace, out)
 
 
 def pose_check(
