@@ -338,3 +338,13 @@ repro-cgail-3skill-ready: install ## cgail: run H's command with reward.goal_ref
 	$(CHARCTL) train cgail reward.goal_reference_window=3 env.ready_radius=0.3 train.total_samples=$(CGAIL_FID_SAMPLES) train.checkpoint_every=20 train.keep_checkpoint_every=2500000 seed=$(CGAIL_SEED) output_root=$(CGAIL_FID)/ready-seed$(CGAIL_SEED)
 	O=$$(ls -d $(CGAIL_FID)/ready-seed$(CGAIL_SEED)/cgail/*/ | tail -1); \
 	$(call cgail-evaluate,$$O) && $(CHARCTL) eval $$O --switch-matrix -k 8 -o $$O/eval/matrix
+
+# The late-switch command (repro-cgail-3skill-return-gated-switch) with the ready start after ramps only
+# (env.ready_radius=0.3 env.ready_after_pass=false): continued 5e6 samples from late-switch seed 2's 4e7 state, it kept
+# the kick -> run switch (7 of 8) that a plain continuation lost (0 of 8) and raised the kick's no-fall to 1.000.
+# From scratch here (docs/cgail.md, "A ready start").
+.PHONY: repro-cgail-3skill-late-switch-ready
+repro-cgail-3skill-late-switch-ready: install ## cgail: the late-switch command with the ready start after ramps only at seed CGAIL_SEED (4e7 samples; ~100 min on 2 cores), evaluated with the switch matrix
+	$(CHARCTL) train cgail env.own_start_weight=0.25 env.own_start_by_success=true env.own_start_floor=0.4 reward.goal_reference_window=3 env.clip_return_seconds=0.5 env.clip_return_after_coverage=0.5 env.switch_prob_after_returns=0.03 env.ready_radius=0.3 env.ready_after_pass=false train.total_samples=$(CGAIL_FID_SAMPLES) train.checkpoint_every=20 train.keep_checkpoint_every=2500000 seed=$(CGAIL_SEED) output_root=$(CGAIL_FID)/late-switch-ready-seed$(CGAIL_SEED)
+	O=$$(ls -d $(CGAIL_FID)/late-switch-ready-seed$(CGAIL_SEED)/cgail/*/ | tail -1); \
+	$(call cgail-evaluate,$$O) && $(CHARCTL) eval $$O --switch-matrix -k 8 -o $$O/eval/matrix

@@ -37,8 +37,9 @@ def test_the_reference_starts_within_the_radius_or_on_its_last_waiting_step(lib)
     wait, grace = a([5, 5, 1, 0, 5]), a([10, 10, 10, 3, 10])
     active = a([True, True, True, True, False])
     err = a([0.1, 0.5, 0.9, 0.1, 0.1])
-    left, grace = ready_update(wait, grace, active, err, 0.3, 10)
+    left, grace, started = ready_update(wait, grace, active, err, 0.3, 10)
     assert left.tolist() == [0, 4, 0, 0, 5] and grace.tolist() == [10, 10, 10, 3, 10]
+    assert started.tolist() == [True, False, True, False, False]
 
 
 @pytest.fixture(scope="module")

@@ -289,9 +289,21 @@ function buildPanel(worker, meta) {
   });
 }
 
+// the commanded clip's timed reference as the policy's phase sees it: its frame, or that it waits for a ramp or
+// (env.ready_radius) for the character to reach the clip's first pose
+function referenceText(meta, s) {
+  const k = meta.skills[s.skill];
+  if (k.heading_goal) return 'none (heading goal)';
+  if (!s.refActive) return 'waits for the ramp';
+  if (s.refWait > 0) return `frame 0 of ${k.clip_frames}, waiting for the first pose (${s.refWait} steps left)`;
+  return `frame ${s.refFrame} of ${k.clip_frames}`;
+}
+
 function updatePanel(meta, s) {
   $('command').textContent = meta.skills[s.skill].name;
   $('ramp').textContent = s.w < 1 ? `(from ${meta.skills[s.skillFrom].name}, w = ${s.w.toFixed(2)})` : '';
+  $('reference-row').hidden = !meta.phase_obs; // the clip phase in the policy state (env.phase_obs)
+  $('reference').textContent = referenceText(meta, s);
   document.querySelectorAll('#skills button').forEach((b) => b.classList.toggle('active', Number(b.dataset.skill) === s.skill));
   if (s.command) {
     document.querySelectorAll('#bars .bar:not(.legend)').forEach((row, k) => {

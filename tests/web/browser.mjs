@@ -59,6 +59,7 @@ try {
     await wait(500);
     result.status_0 = await status(); // still paused: time 0
     result.command_0 = await page.textContent('#command');
+    result.reference_0 = await page.textContent('#reference');
     await page.screenshot({ path: path.join(out, 'page_0s.png') });
     // the simulation thread pauses itself at 5 s for the second screenshot (taking one can outlast a
     // second of simulation with software WebGL); Space (the page's pause key) starts and resumes it

@@ -377,11 +377,9 @@ class CgailEnv:
         """env.ready_radius: the waiting references whose character is within the radius of frame 0 (`ref`, the
         (N, 133) timed reference; `obs` the disc observations after the step) start (`rules.ready_update`)."""
         err = reference_pose_error(obs, ref, self.root_scale)
-        waiting = self.ref_active & (self.ref_wait > 0)
-        self.ref_wait, self.ref_grace = ready_update(
+        self.ref_wait, self.ref_grace, started = ready_update(
             self.ref_wait, self.ref_grace, self.ref_active, err, self.ready_radius, self.pose_grace
         )
-        started = waiting & (self.ref_wait == 0)
         self._ready_counts = self._ready_counts + namespace(err).stack(
             [started.sum(), (started & (err >= self.ready_radius)).sum()]
         )

@@ -328,18 +328,18 @@ def start_waiting(ref_wait: Array, starting: Array, has_goal: Array, wait_steps:
 
 def ready_update(
     ref_wait: Array, ref_grace: Array, ref_active: Array, err: Array, radius: float, grace: int
-) -> tuple[Array, Array]:
-    """One control step of the ready start (env.ready_radius `radius` m): (ref_wait, ref_grace), both (N,).
+) -> tuple[Array, Array, Array]:
+    """One control step of the ready start (env.ready_radius `radius` m): (ref_wait, ref_grace, started), all (N,).
 
-    An env whose running reference (`ref_active`) waits at frame 0 (`ref_wait` > 0) starts it when its pose error
-    `err` (N,) m against frame 0 is below `radius` or on its last waiting step (`ref_wait` == 1): its wait becomes
-    0 and its grace steps `grace` start now (the clip advances from the next step). Otherwise the wait counts down.
-    The grace steps of a waiting env stay where its restart set them (`grace`), so the pose check waits too."""
+    An env whose running reference (`ref_active`) waits at frame 0 (`ref_wait` > 0) starts it (`started`) when its
+    pose error `err` (N,) m against frame 0 is below `radius` or on its last waiting step (`ref_wait` == 1): its wait
+    becomes 0 and its grace steps `grace` start now (the clip advances from the next step). Otherwise the wait counts
+    down. The grace steps of a waiting env stay where its restart set them (`grace`), so the pose check waits too."""
     xp = namespace(ref_wait, err)
     waiting = ref_active & (ref_wait > 0)
     start = waiting & ((err < radius) | (ref_wait <= 1))
     left = xp.where(start, xp.zeros_like(ref_wait), xp.where(waiting, ref_wait - 1, ref_wait))
-    return left, xp.where(start, xp.full_like(ref_grace, grace), ref_grace)
+    return left, xp.where(start, xp.full_like(ref_grace, grace), ref_grace), start
 
 
 def count_down_grace(ref_grace: Array, restarted: Array, grace: int, held: Array | None = None) -> Array:

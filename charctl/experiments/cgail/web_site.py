@@ -90,11 +90,6 @@ def site_meta(tr, model, checkpoint: str | None) -> dict:
 
     skel = load_skeleton()
     env = tr.cfg.env
-    if float(getattr(env, "ready_radius", 0.0)) > 0:
-        raise CharctlError(
-            f"{tr.run_dir} was trained with env.ready_radius (the reference waits for the character), which the web "
-            "demo's phase (web/sim.js) does not implement"
-        )
     keys = [str((i + 1) % 10) for i in range(min(10, len(tr.skill_names)))]
     return {
         "format": 1,
@@ -118,6 +113,11 @@ def site_meta(tr, model, checkpoint: str | None) -> dict:
         "armature": float(env.armature),
         "ramp_frames": int(env.ramp_frames),
         "phase_obs": bool(getattr(env, "phase_obs", False)),  # the policy state ends with the clip phase
+        # env.ready_radius (m; 0 off): the reference the phase shows holds frame 0 until the graph's start_err is below
+        # it, as in the evaluation env (whose only timed reference is the phase's)
+        "ready_radius": float(env.ready_radius) if env.phase_obs else 0.0,
+        "ready_wait_steps": int(env.ready_wait_steps),
+        "ready_after_pass": bool(env.ready_after_pass),
         "action_scale": float(env.action_scale),
         "fall_tolerance": float(env.fall_tolerance),
         "obs_dim": DISC_OBS_DIM,
