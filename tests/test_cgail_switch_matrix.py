@@ -106,3 +106,26 @@ def test_the_matrix_rule_asks_for_the_clips_poses_not_only_the_foot():
     assert out["coverage"][2] < PERFORM_COVERAGE and out["rule"] == "foot_peak+coverage"
     assert out["performed"] == 1
     assert performed_after_switch(tr, 0, pos, rot, alive, t_switch=5)["performed"] == 2
+
+
+def test_switch_coverage_judges_each_trial_on_its_own_frames_as_frame_match_does():
+    """The clip replayed in three trials, judged from frame `start` = 4 to each trial's length (the whole clip, its
+    first half, nothing left): per trial the share of the clip's frames that `frame_match` (the fidelity evaluation's
+    per-sequence match) finds within 15 cm over exactly those frames; 0 where none are left."""
+    from charctl.eval.fidelity import COVERAGE_TOL, frame_match, heading_positions
+    from charctl.experiments.cgail.config import SkillConfig
+    from charctl.experiments.cgail.fidelity import clip_reference
+    from charctl.experiments.cgail.metrics import switch_coverage
+    from charctl.experiments.cgail.skills import load_skills
+
+    kick = load_skills([SkillConfig("right_kick", "kick")], 30.0)[0]
+    ref = clip_reference(kick)
+    F = len(ref.body_pos)
+    pos = np.repeat(ref.body_pos[:, None], 3, axis=1)  # (F, 3, 15, 3)
+    rot = np.repeat(ref.body_rot[:, None], 3, axis=1)
+    lengths = np.array([F, F // 2, 3])
+    got = switch_coverage(kick, pos, rot, 4, lengths)
+    rel = heading_positions(ref.body_pos, ref.body_rot[:, 0])
+    want = [np.mean(frame_match(rel[4:n], ref.rel)[0] <= COVERAGE_TOL) for n in lengths[:2]]
+    assert 0.9 < want[0] <= 1.0 and 0.3 < want[1] < 0.7  # frames 0-3 are left out; half the clip covers half
+    np.testing.assert_allclose(got, [*want, 0.0])

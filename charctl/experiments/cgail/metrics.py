@@ -184,16 +184,16 @@ def switch_coverage(skill, pos: np.ndarray, rot: np.ndarray, start: int, lengths
     """(N,) per trial, the pose coverage of `skill`'s clip (a `SkillData`; the fidelity evaluation's: the share of
     its frames some recorded frame matches within 15 cm at every body, root-relative in the heading frame) by the
     frames `start` to `lengths` (N,) of `pos` / `rot` (F, N, 15, ...) world bodies; 0 where none are left."""
-    from charctl.eval.fidelity import COVERAGE_TOL, frame_match, heading_positions
+    from charctl.eval.fidelity import COVERAGE_TOL, heading_positions
     from charctl.experiments.cgail.fidelity import clip_reference
 
-    clip = clip_reference(skill).rel
+    clip = clip_reference(skill).rel  # (m, 15, 3)
     rel = heading_positions(pos, rot[:, :, 0])  # (F, N, 15, 3)
-    out = np.zeros(pos.shape[1])
-    for i, n in enumerate(lengths):  # one DTW-free match per trial (F x m x 15 distances)
-        if n > start:
-            out[i] = float(np.mean(frame_match(rel[start:n, i], clip)[0] <= COVERAGE_TOL))
-    return out
+    worst = np.linalg.norm(rel[:, :, None] - clip[None, None], axis=-1).max(axis=-1)  # (F, N, m): farthest body
+    frame = np.arange(len(rel))[:, None]
+    kept = (frame >= start) & (frame < np.asarray(lengths)[None, :])  # (F, N): the frames each trial is judged on
+    best = np.where(kept[..., None], worst, np.inf).min(axis=0)  # (N, m): `frame_match`'s distance per trial
+    return (best <= COVERAGE_TOL).mean(axis=1)
 
 
 def last_second_speed(root: np.ndarray, hz: float) -> np.ndarray:
