@@ -34,8 +34,9 @@ CGAIL_DEMO_SCHEDULE := walk:0,run:4,right_kick:8
 CGAIL_FID := outputs/repro/cgail-fidelity
 CGAIL_FID_RECIPE := disc.style_head=per_skill disc.wrong_skill_fakes=0.25 cgail.class_on_policy=false reward.w_style=0.8 reward.w_class=0.2 reward.class_form=prob ppo.desired_kl=0.02 ppo.lr_max=1e-4 train.checkpoint_every=20 train.keep_checkpoint_every=2500000 seed=1
 CGAIL_FID_SAMPLES ?= 40000000
-# The evaluations each 3-skill and ten-skill run below gets: $(call cgail-evaluate,RUN_DIR).
-cgail-evaluate = $(CHARCTL) eval $(1) --fidelity -k 4 && $(CHARCTL) eval $(1) --survival 5 -k 32 && $(CHARCTL) eval $(1) --dtw --confusion --switch walk right_kick -k 8
+# The evaluations each 3-skill and ten-skill run below gets: $(call cgail-evaluate,RUN_DIR), then the targets they meet
+# (RUN_DIR/eval/targets.md, scripts/check_targets_cgail.py).
+cgail-evaluate = $(CHARCTL) eval $(1) --fidelity -k 4 && $(CHARCTL) eval $(1) --survival 5 -k 32 && $(CHARCTL) eval $(1) --dtw --confusion --switch walk right_kick -k 8 && $(PY) scripts/check_targets_cgail.py $(1)/eval --out $(1)/eval/targets.md
 
 .PHONY: repro-cgail-fidelity
 repro-cgail-fidelity: install ## cgail: the fidelity recipe's runs A to E (3 skills, 8e7 samples; ~7 h on 2 cores) = pretrained/cgail-3skill-fidelity, with its evaluations
@@ -337,7 +338,7 @@ repro-cgail-spindance-probes: install ## cgail: spindance alone, tracking + pose
 repro-cgail-3skill-ready: install ## cgail: run H's command with reward.goal_reference_window=3 and env.ready_radius=0.3 at seed CGAIL_SEED (4e7 samples; ~75 min on 2 cores), evaluated with the switch matrix
 	$(CHARCTL) train cgail reward.goal_reference_window=3 env.ready_radius=0.3 train.total_samples=$(CGAIL_FID_SAMPLES) train.checkpoint_every=20 train.keep_checkpoint_every=2500000 seed=$(CGAIL_SEED) output_root=$(CGAIL_FID)/ready-seed$(CGAIL_SEED)
 	O=$$(ls -d $(CGAIL_FID)/ready-seed$(CGAIL_SEED)/cgail/*/ | tail -1); \
-	$(call cgail-evaluate,$$O) && $(CHARCTL) eval $$O --switch-matrix -k 8 -o $$O/eval/matrix
+	$(call cgail-evaluate,$$O) && $(CHARCTL) eval $$O --switch-matrix -k 8 -o $$O/eval/matrix && $(PY) scripts/check_targets_cgail.py $$O/eval --out $$O/eval/targets.md
 
 # The late-switch command (repro-cgail-3skill-return-gated-switch) with the ready start after ramps only
 # (env.ready_radius=0.3 env.ready_after_pass=false): continued 5e6 samples from late-switch seed 2's 4e7 state, it kept
@@ -347,4 +348,4 @@ repro-cgail-3skill-ready: install ## cgail: run H's command with reward.goal_ref
 repro-cgail-3skill-late-switch-ready: install ## cgail: the late-switch command with the ready start after ramps only at seed CGAIL_SEED (4e7 samples; ~100 min on 2 cores), evaluated with the switch matrix
 	$(CHARCTL) train cgail env.own_start_weight=0.25 env.own_start_by_success=true env.own_start_floor=0.4 reward.goal_reference_window=3 env.clip_return_seconds=0.5 env.clip_return_after_coverage=0.5 env.switch_prob_after_returns=0.03 env.ready_radius=0.3 env.ready_after_pass=false train.total_samples=$(CGAIL_FID_SAMPLES) train.checkpoint_every=20 train.keep_checkpoint_every=2500000 seed=$(CGAIL_SEED) output_root=$(CGAIL_FID)/late-switch-ready-seed$(CGAIL_SEED)
 	O=$$(ls -d $(CGAIL_FID)/late-switch-ready-seed$(CGAIL_SEED)/cgail/*/ | tail -1); \
-	$(call cgail-evaluate,$$O) && $(CHARCTL) eval $$O --switch-matrix -k 8 -o $$O/eval/matrix
+	$(call cgail-evaluate,$$O) && $(CHARCTL) eval $$O --switch-matrix -k 8 -o $$O/eval/matrix && $(PY) scripts/check_targets_cgail.py $$O/eval --out $$O/eval/targets.md
