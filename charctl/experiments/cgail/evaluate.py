@@ -47,6 +47,7 @@ from charctl.experiments.cgail.rollouts import (
     split_eval_overrides,
     switch_rollout,
 )
+from charctl.progress import TrainingProgress
 
 __all__ = [
     "check_mode_arguments",
@@ -115,9 +116,12 @@ def eval_switch_matrix(tr: DeviceRun, trials: int, out: Path, before_s: float = 
     names = tr.skill_names
     cells = {}
     t_switch, ramp = frames["switch_frame"], frames["ramp_frames"]
-    for ka, kb in ((i, j) for i in range(len(names)) for j in range(len(names)) if i != j):
-        rec = _switch_recording(tr, ka, kb, trials, ramp, frames)
-        cells[(names[ka], names[kb])] = switch_summary(tr, kb, rec, t_switch, ramp, trials, coverage_from=ramp)
+    pairs = [(i, j) for i in range(len(names)) for j in range(len(names)) if i != j]
+    with TrainingProgress(len(pairs), "switch matrix", unit="pairs") as bar:
+        for ka, kb in pairs:  # one rollout per pair: each draws the env's random numbers as `--switch` does
+            rec = _switch_recording(tr, ka, kb, trials, ramp, frames)
+            cells[(names[ka], names[kb])] = switch_summary(tr, kb, rec, t_switch, ramp, trials, coverage_from=ramp)
+            bar.update(1, pair=f"{names[ka]}->{names[kb]}", done=cells[(names[ka], names[kb])]["performed"])
     return write_switch_matrix(out, tr, cells, frames)
 
 
