@@ -9,7 +9,7 @@ from omegaconf import OmegaConf
 
 from charctl.experiments.cgail.config import EnvConfig, SkillConfig
 from charctl.experiments.cgail.env import CgailEnv
-from charctl.experiments.cgail.rules import hold_reference, ready_update, start_waiting
+from charctl.experiments.cgail.rules import hold_reference, ready_update, ready_waits, start_waiting
 from charctl.experiments.cgail.skills import load_skills
 
 
@@ -23,10 +23,16 @@ def test_a_waiting_reference_keeps_its_frame_and_does_not_restart(lib):
 
 
 @pytest.mark.parametrize("lib", [np, torch])
-def test_a_restart_waits_only_for_skills_without_a_heading_goal(lib):
+def test_a_restart_waits_only_for_skills_whose_restarts_wait(lib):
     a = lib.tensor if lib is torch else np.array
-    wait = start_waiting(a([0, 7, 4]), a([True, True, False]), a([False, True, False]), 30)
+    wait = start_waiting(a([0, 7, 4]), a([True, True, False]), a([True, False, True]), 30)
     assert wait.tolist() == [30, 0, 4]  # the kick waits, the walk's restart clears it, env 2 keeps its count
+
+
+def test_which_skills_wait_heading_goals_never_and_with_the_return_only_once_it_is_on():
+    goal, returning = [True, False, False], [False, True, False]  # walk; kick with its way back on; jump without
+    assert ready_waits(goal, returning, with_return=False) == [False, True, True]
+    assert ready_waits(goal, returning, with_return=True) == [False, True, False]
 
 
 @pytest.mark.parametrize("lib", [np, torch])
@@ -156,3 +162,37 @@ def test_without_the_wait_after_a_pass_only_a_ramp_into_the_kick_waits():
     first = frames.index(0)
     # the ramp's end sets frame 0 after its step's check, so the 4 waiting steps follow that frame: five at frame 0
     assert frames[first : first + 7] == [0, 0, 0, 0, 0, 1, 2], frames
+
+
+def test_with_the_return_gate_the_kick_waits_only_once_its_way_back_is_on():
+    """env.ready_with_return: the kick without its way back restarts its next pass on time (as without the radius);
+    swapped for the kick with the way back (`use_skills`, as the training's coverage gate does), it waits."""
+    cfg = OmegaConf.structured(
+        EnvConfig(num_envs=2, switch_prob=0.0, ready_radius=1e-9, ready_wait_steps=4, ready_with_return=True)
+    )
+    plain = load_skills([SkillConfig("kick", "kick")], 30.0, return_seconds=0.5, returning=())
+    env = CgailEnv(plain, cfg, seed=0, pose_error_threshold=100.0, pose_error_grace_steps=3)
+    zeros = np.zeros((2, env.sim.layout.nu))
+    last = len(plain[0].obs) - 1
+    env.ref_frame[:] = last - 1
+    assert not plain[0].has_return and env.ready_skills.tolist() == [False]
+    assert [f[0] for f in _frames(env, 4, zeros)] == [last, 0, 1, 2]  # on time
+    back = load_skills([SkillConfig("kick", "kick")], 30.0, return_seconds=0.5, returning=("kick",))
+    env.use_skills(back)
+    last = len(back[0].obs) - 1
+    assert back[0].has_return and env.ready_skills.tolist() == [True]
+    env.ref_frame[:] = last - 1
+    assert [f[0] for f in _frames(env, 7, zeros)] == [last, 0, 0, 0, 0, 1, 2]  # held for the 4 waiting steps
+
+
+def test_the_return_gate_needs_the_radius_and_the_coverage_gate():
+    from charctl.config import compose_config
+    from charctl.errors import CharctlError
+    from charctl.experiments.cgail.config import Config
+
+    base = ["scale=smoke", "env.phase_obs=true", "env.ready_with_return=true"]
+    with pytest.raises(CharctlError, match="env.ready_with_return starts the ready start with each skill's way back"):
+        compose_config("cgail", [*base, "env.ready_radius=0.3"], Config)
+    gated = ["env.ready_radius=0.3", "env.clip_return_seconds=0.5", "env.clip_return_after_coverage=0.5"]
+    cfg = compose_config("cgail", [*base, *gated, "train.fidelity_every=1000000"], Config)
+    assert cfg.env.ready_with_return

@@ -456,6 +456,7 @@ def test_a_phase_obs_run_plays_in_node_with_the_envs_phase_and_ready_start(tmp_p
     meta = json.loads((site / "meta.json").read_text())
     assert meta["phase_obs"] is True and [s["loops"] for s in meta["skills"]] == [True, False]
     assert (meta["ready_radius"], meta["ready_wait_steps"], meta["ready_after_pass"]) == (*READY, True)
+    assert [s["ready_waits"] for s in meta["skills"]] == [False, True]  # the walk has a heading goal
     import onnx
 
     assert [i.name for i in onnx.load(str(site / "policy.onnx")).graph.input] == list(graph_inputs(True))

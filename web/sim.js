@@ -64,6 +64,7 @@ export class Character {
     this.readyRadius = meta.ready_radius ?? 0;
     this.readyWaitSteps = meta.ready_wait_steps ?? 30;
     this.readyAfterPass = meta.ready_after_pass ?? true;
+    this.readyWaits = meta.skills.map((s) => s.ready_waits ?? !s.heading_goal); // rules.ready_waits, per skill
     this.falls = 0;
     this.fallen = false;
     this.steps = 0;
@@ -177,9 +178,10 @@ export class Character {
     if (restarted && this.readyRadius > 0 && this.readyAfterPass) this._startWaiting();
   }
 
-  // rules.start_waiting: a reference starting at frame 0 waits for the character unless its skill has a heading goal
+  // rules.start_waiting: a reference starting at frame 0 waits for the character where its skill's restarts wait
+  // (no heading goal; with env.ready_with_return, once the skill's way back is on)
   _startWaiting() {
-    this.refWait = this.hasGoal[this.skillTo] ? 0 : this.readyWaitSteps;
+    this.refWait = this.readyWaits[this.skillTo] ? this.readyWaitSteps : 0;
   }
 
   // rules.ready_update on the pose error `err` (m) against the clip's frame 0: start within the radius or on the

@@ -146,6 +146,11 @@ class EnvConfig:
     # to stand in the clip's first pose and not to leave it for the run; a plain continuation did too, and false kept
     # the kick -> run switch (7 of 8) in a 5e6-sample continuation at seed 2 (docs/cgail.md, "A ready start").
     ready_after_pass: bool = True
+    # With env.ready_radius and env.clip_return_after_coverage: a skill's reference waits only once its way back is on
+    # (its training coverage reached the gate), so the first kick is learned as without the ready start. Both runs
+    # from scratch with the wait from the first sample (seeds 2 and 1) had not learned the kick at 4e7 or 1.8e7, where
+    # the same commands without it kick by 2.5e7 (docs/cgail.md, "A ready start").
+    ready_with_return: bool = False
     action_scale: float = ranged(1.0, gt=0)  # PD target (rad) = rest pose + action_scale * action
     fall_tolerance: float = ranged(0.005, ge=0)  # m: a non-foot body this close to the ground ends the episode (a fall)
     goal_max_angle_deg: float = 45.0  # new heading goals lie within +- this angle of the current heading
@@ -460,6 +465,11 @@ def _check_env(cfg) -> str | None:
                 "env.own_start_weight > 0 needs a reference that restarts at frame 0: reward.kind=adversarial with "
                 "env.phase_obs=true or reward.pose_error_threshold > 0, and reward.pose_error_grace_steps >= 1"
             )
+    if env.ready_with_return and (env.ready_radius <= 0 or env.clip_return_after_coverage <= 0):
+        return (
+            "env.ready_with_return starts the ready start with each skill's way back: set env.ready_radius > 0 and "
+            "env.clip_return_after_coverage > 0 with it"
+        )
     if env.ready_radius > 0 and (cfg.reward.kind != "adversarial" or not timed):
         return (
             "env.ready_radius holds a timed reference that restarts at frame 0: reward.kind=adversarial with "

@@ -50,6 +50,7 @@ from charctl.experiments.cgail.rules import (
     pose_key_error_frames,
     pose_keys,
     ready_update,
+    ready_waits,
     reference_pose_error,
     restart_after_ramp,
     root_height_scale,
@@ -165,6 +166,9 @@ class CgailEnv:
         self.rsi_frames = a.array([len(s.qpos) for s in skills], i64)
         self.clip_loops = a.array([s.loop for s in skills], a.bool_dtype)
         self.has_goal = a.array([s.heading_goal for s in skills], a.bool_dtype)
+        returning = [s.has_return for s in skills]
+        waits = ready_waits([s.heading_goal for s in skills], returning, bool(self.cfg.ready_with_return))
+        self.ready_skills = a.array(waits, a.bool_dtype)  # env.ready_radius: the skills whose restarts wait
         self.speed = a.array([s.mean_speed for s in skills], a.dtype)
         clips = np.array([len(s.obs) for s in skills]), np.array([s.loop for s in skills])
         lead = start_frames.lead_window_index(*clips, self.cfg.start_failure_lead)
@@ -334,7 +338,7 @@ class CgailEnv:
                 self.ref_frame, again = hold_reference(frame, self.ref_frame, again, self.ref_wait)
             self.ref_grace = count_down_grace(self.ref_grace, again, self.pose_grace, held)
             if self.ready_radius > 0 and self.ready_after_pass:
-                self.ref_wait = start_waiting(self.ref_wait, again, self.has_goal[cmd], self.ready_wait)
+                self.ref_wait = start_waiting(self.ref_wait, again, self.ready_skills[cmd], self.ready_wait)
         return self._reference_obs(), ended
 
     def _reference_obs(self, frames=None):
@@ -371,7 +375,7 @@ class CgailEnv:
         )
         if self.ready_radius > 0:
             starting = self.ref_active & ~was_active
-            self.ref_wait = start_waiting(self.ref_wait, starting, self.has_goal[self.cmd], self.ready_wait)
+            self.ref_wait = start_waiting(self.ref_wait, starting, self.ready_skills[self.cmd], self.ready_wait)
 
     def _start_when_ready(self, obs, ref) -> None:
         """env.ready_radius: the waiting references whose character is within the radius of frame 0 (`ref`, the

@@ -317,13 +317,19 @@ def hold_reference(frame: Array, advanced: Array, restarted: Array, ref_wait: Ar
     return xp.where(waiting, frame, advanced), restarted & ~waiting
 
 
-def start_waiting(ref_wait: Array, starting: Array, has_goal: Array, wait_steps: int) -> Array:
+def start_waiting(ref_wait: Array, starting: Array, waits: Array, wait_steps: int) -> Array:
     """(N,) control steps the reference waits at frame 0 (env.ready_radius): `wait_steps` where it restarts at frame
-    0 this step (`starting`) for a skill without a heading goal (`has_goal` false), 0 where it restarts for one with a
-    heading goal (scored against its closest frame, nothing to wait for); the others keep theirs."""
+    0 this step (`starting`) for a skill whose reference waits (`waits`, `ready_waits`), 0 where it restarts for one
+    that does not (a heading goal: scored against its closest frame, nothing to wait for); the others keep theirs."""
     xp = namespace(ref_wait, starting)
-    fresh = xp.where(has_goal, xp.zeros_like(ref_wait), xp.full_like(ref_wait, wait_steps))
+    fresh = xp.where(waits, xp.full_like(ref_wait, wait_steps), xp.zeros_like(ref_wait))
     return xp.where(starting, fresh, ref_wait)
+
+
+def ready_waits(heading_goal: list[bool], returning: list[bool], with_return: bool) -> list[bool]:
+    """Per skill, whether its restarted reference waits for the character (env.ready_radius): every skill without a
+    heading goal, or with env.ready_with_return only those of them whose way back is on (`returning`)."""
+    return [not g and (r or not with_return) for g, r in zip(heading_goal, returning, strict=True)]
 
 
 def ready_update(

@@ -35,6 +35,12 @@ class SkillData:
     own_qvel: np.ndarray | None = None
     own_obs: np.ndarray | None = None
 
+    @property
+    def has_return(self) -> bool:
+        """Whether env.clip_return_seconds' way back is appended to this skill's reference (its frames run on past
+        the clip's own)."""
+        return len(self.obs) > self.clip_frames
+
     def clip_only(self) -> SkillData:
         """This skill's arrays as the clip alone (without env.clip_return_seconds' return): what the evaluations
         compare a policy with. The env's reference, RSI and demonstrations use all T frames."""

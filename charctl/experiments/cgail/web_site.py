@@ -86,11 +86,14 @@ def initial_states(tr) -> list[dict]:
 
 def site_meta(tr, model, checkpoint: str | None) -> dict:
     from charctl.experiments.cgail.features import DISC_OBS_DIM
+    from charctl.experiments.cgail.rules import ready_waits
     from charctl.motion.skeleton import load_skeleton
 
     skel = load_skeleton()
     env = tr.cfg.env
     keys = [str((i + 1) % 10) for i in range(min(10, len(tr.skill_names)))]
+    skills = tr.agent.skills  # with the checkpoint's ways back (env.clip_return_after_coverage)
+    waits = ready_waits([s.heading_goal for s in skills], [s.has_return for s in skills], env.ready_with_return)
     return {
         "format": 1,
         "run": tr.run_dir.name,
@@ -104,9 +107,10 @@ def site_meta(tr, model, checkpoint: str | None) -> dict:
                 "heading_goal": bool(s.heading_goal),
                 "clip_frames": len(s.obs),  # control frames of the clip: the phase's period (env.phase_obs)
                 "loops": bool(s.loop),
+                "ready_waits": waits[i],  # env.ready_radius: whether a restart of its reference waits
                 "key": keys[i] if i < 10 else "",
             }
-            for i, s in enumerate(tr.agent.skills)
+            for i, s in enumerate(skills)
         ],
         "physics_hz": float(env.physics_hz),
         "control_hz": float(env.control_hz),
