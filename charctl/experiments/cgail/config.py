@@ -147,9 +147,11 @@ class EnvConfig:
     # the kick -> run switch (7 of 8) in a 5e6-sample continuation at seed 2 (docs/cgail.md, "A ready start").
     ready_after_pass: bool = True
     # With env.ready_radius and env.clip_return_after_coverage: a skill's reference waits only once its way back is on
-    # (its training coverage reached the gate), so the first kick is learned as without the ready start. Both runs
-    # from scratch with the wait from the first sample (seeds 2 and 1) had not learned the kick at 4e7 or 1.8e7, where
-    # the same commands without it kick by 2.5e7 (docs/cgail.md, "A ready start").
+    # (its training coverage reached the gate), so the first kick is learned as without the ready start (the runs from
+    # scratch with the wait from the first sample had not learned the kick at 4e7, seed 2, or 2.4e7, seed 1). Emulated
+    # at seed 1 (the late-switch run's 2.75e7 state continued with the wait to 4e7): the kick after a ramp came late
+    # (walk -> kick 0 of 8 in 3 s), walk -> run lost, kick -> walk gained; not adopted (docs/cgail.md, "The ready start
+    # after ramps, at seed 1").
     ready_with_return: bool = False
     action_scale: float = ranged(1.0, gt=0)  # PD target (rad) = rest pose + action_scale * action
     fall_tolerance: float = ranged(0.005, ge=0)  # m: a non-foot body this close to the ground ends the episode (a fall)
