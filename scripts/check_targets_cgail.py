@@ -68,14 +68,17 @@ def run_label(table: dict) -> str:
     return labels[0].removesuffix(" no-fall")
 
 
+def _coverage_row(skill: str, s: dict | None, bound: float) -> tuple:
+    """The row of `skill`'s pose coverage (`s`: its fidelity.json entry) against `bound`."""
+    return f"{skill} coverage", s and s["coverage"], f">= {bound}", s and s["coverage"] >= bound
+
+
 def rows_three(fid: dict | None, surv: dict | None, dtw: dict | None, switch: dict | None) -> list[tuple]:
     b = THREE_BOUNDS
     rows: list[tuple] = []
     for skill in THREE:
         s = fid["skills"][skill] if fid else None
-        rows.append(
-            (f"{skill} coverage", s and s["coverage"], f">= {b['coverage']}", s and s["coverage"] >= b["coverage"])
-        )
+        rows.append(_coverage_row(skill, s, b["coverage"]))
         rows.append(
             (
                 f"{skill} body error (m)",
@@ -141,9 +144,7 @@ def rows_ten(fid: dict | None, surv: dict | None, dtw: dict | None, skills: list
     rows: list[tuple] = []
     for skill in skills:
         s = fid["skills"][skill] if fid else None
-        rows.append(
-            (f"{skill} coverage", s and s["coverage"], f">= {b['coverage']}", s and s["coverage"] >= b["coverage"])
-        )
+        rows.append(_coverage_row(skill, s, b["coverage"]))
         for name in named_signatures(s["clip"]) if s else []:
             foot = kicking_foot(s["reference"])
             p, r = (signature_value(x, name, foot) for x in (s["policy"], s["reference"]))
