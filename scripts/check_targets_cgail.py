@@ -68,42 +68,28 @@ def run_label(table: dict) -> str:
     return labels[0].removesuffix(" no-fall")
 
 
-def _coverage_row(skill: str, s: dict | None, bound: float) -> tuple:
+def _coverage_row(skill: str, s: dict, bound: float) -> tuple:
     """The row of `skill`'s pose coverage (`s`: its fidelity.json entry) against `bound`."""
-    return f"{skill} coverage", s and s["coverage"], f">= {bound}", s and s["coverage"] >= bound
+    return f"{skill} coverage", s["coverage"], f">= {bound}", s["coverage"] >= bound
 
 
-def rows_three(fid: dict | None, surv: dict | None, dtw: dict | None, switch: dict | None) -> list[tuple]:
+def rows_three(fid: dict, surv: dict | None, dtw: dict | None, switch: dict | None) -> list[tuple]:
+    """The three-skill rows; `fid` (fidelity.json) is required, the others give "not measured" rows when None."""
     b = THREE_BOUNDS
     rows: list[tuple] = []
     for skill in THREE:
-        s = fid["skills"][skill] if fid else None
+        s = fid["skills"][skill]
         rows.append(_coverage_row(skill, s, b["coverage"]))
-        rows.append(
-            (
-                f"{skill} body error (m)",
-                s and s["body_error"],
-                f"<= {b['body_error']}",
-                s and s["body_error"] <= b["body_error"],
-            )
-        )
-    if fid:
-        p, r = fid["skills"]["right_kick"]["policy"], fid["skills"]["right_kick"]["reference"]
-        foot = kicking_foot(r)
-        share = p[f"{foot}_foot_peak"] / r[f"{foot}_foot_peak"]
-        rows.append(("right_kick foot peak / clip's", share, f">= {b['kick_foot']}", share >= b["kick_foot"]))
-        p, r = fid["skills"]["run"]["policy"], fid["skills"]["run"]["reference"]
-        for key in ("speed", "airborne"):
-            rows.append(
-                (
-                    f"run {key} (clip {r[key]:.2f})",
-                    p[key],
-                    f"within {b['run_within']:.0%}",
-                    within(p[key], r[key], b["run_within"]),
-                )
-            )
-    else:
-        rows += [(name, None, "", None) for name in ("right_kick foot peak / clip's", "run speed", "run airborne")]
+        err = s["body_error"]
+        rows.append((f"{skill} body error (m)", err, f"<= {b['body_error']}", err <= b["body_error"]))
+    p, r = fid["skills"]["right_kick"]["policy"], fid["skills"]["right_kick"]["reference"]
+    foot = kicking_foot(r)
+    share = p[f"{foot}_foot_peak"] / r[f"{foot}_foot_peak"]
+    rows.append(("right_kick foot peak / clip's", share, f">= {b['kick_foot']}", share >= b["kick_foot"]))
+    p, r = fid["skills"]["run"]["policy"], fid["skills"]["run"]["reference"]
+    for key in ("speed", "airborne"):
+        ok = within(p[key], r[key], b["run_within"])
+        rows.append((f"run {key} (clip {r[key]:.2f})", p[key], f"within {b['run_within']:.0%}", ok))
     rows += _dtw_rows(dtw, THREE)
     rows += _no_fall_rows(surv, THREE, b["no_fall"])
     for cond in ("ramp", "no_ramp"):
@@ -139,13 +125,14 @@ def _no_fall_rows(surv: dict | None, skills, bound: float) -> list[tuple]:
     ]
 
 
-def rows_ten(fid: dict | None, surv: dict | None, dtw: dict | None, skills: list[str]) -> list[tuple]:
+def rows_ten(fid: dict, surv: dict | None, dtw: dict | None, skills: list[str]) -> list[tuple]:
+    """The ten-skill rows; `fid` (fidelity.json) is required, the others give "not measured" rows when None."""
     b = TEN_BOUNDS
     rows: list[tuple] = []
     for skill in skills:
-        s = fid["skills"][skill] if fid else None
+        s = fid["skills"][skill]
         rows.append(_coverage_row(skill, s, b["coverage"]))
-        for name in named_signatures(s["clip"]) if s else []:
+        for name in named_signatures(s["clip"]):
             foot = kicking_foot(s["reference"])
             p, r = (signature_value(x, name, foot) for x in (s["policy"], s["reference"]))
             label = f"{foot} foot peak" if name == "foot" else name.replace("_", " ")

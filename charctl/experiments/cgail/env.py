@@ -50,7 +50,6 @@ from charctl.experiments.cgail.rules import (
     pose_key_error_frames,
     pose_keys,
     ready_update,
-    ready_waits,
     reference_pose_error,
     restart_after_ramp,
     root_height_scale,
@@ -61,7 +60,7 @@ from charctl.experiments.cgail.rules import (
     update_fall_rates,
     yaw_scale,
 )
-from charctl.experiments.cgail.skills import SkillData
+from charctl.experiments.cgail.skills import SkillData, skills_that_wait
 from charctl.experiments.cgail.step_result import StepResult
 from charctl.motion.array_compat import namespace, rotations_for
 
@@ -166,8 +165,7 @@ class CgailEnv:
         self.rsi_frames = a.array([len(s.qpos) for s in skills], i64)
         self.clip_loops = a.array([s.loop for s in skills], a.bool_dtype)
         self.has_goal = a.array([s.heading_goal for s in skills], a.bool_dtype)
-        returning = [s.has_return for s in skills]
-        waits = ready_waits([s.heading_goal for s in skills], returning, bool(self.cfg.ready_with_return))
+        waits = skills_that_wait(skills, bool(self.cfg.ready_with_return))
         self.ready_skills = a.array(waits, a.bool_dtype)  # env.ready_radius: the skills whose restarts wait
         self.speed = a.array([s.mean_speed for s in skills], a.dtype)
         clips = np.array([len(s.obs) for s in skills]), np.array([s.loop for s in skills])

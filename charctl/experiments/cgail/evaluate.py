@@ -120,8 +120,9 @@ def eval_switch_matrix(tr: DeviceRun, trials: int, out: Path, before_s: float = 
     with TrainingProgress(len(pairs), "switch matrix", unit="pairs") as bar:
         for ka, kb in pairs:  # one rollout per pair: each draws the env's random numbers as `--switch` does
             rec = _switch_recording(tr, ka, kb, trials, ramp, frames)
-            cells[(names[ka], names[kb])] = switch_summary(tr, kb, rec, t_switch, ramp, trials, coverage_from=ramp)
-            bar.update(1, pair=f"{names[ka]}->{names[kb]}", done=cells[(names[ka], names[kb])]["performed"])
+            cell = switch_summary(tr, kb, rec, t_switch, ramp, trials, coverage_from=ramp)
+            cells[(names[ka], names[kb])] = cell
+            bar.update(1, pair=f"{names[ka]}->{names[kb]}", done=cell["performed"])
     return write_switch_matrix(out, tr, cells, frames)
 
 

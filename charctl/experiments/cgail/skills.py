@@ -52,6 +52,14 @@ class SkillData:
         )
 
 
+def skills_that_wait(skills: list[SkillData], with_return: bool) -> list[bool]:
+    """Per skill, whether a restart of its reference waits for the character (env.ready_radius; `rules.ready_waits`
+    on the skills' heading goals and ways back, env.ready_with_return `with_return`)."""
+    from charctl.experiments.cgail.rules import ready_waits
+
+    return ready_waits([s.heading_goal for s in skills], [s.has_return for s in skills], with_return)
+
+
 def load_skills(
     skills,
     control_hz: float,

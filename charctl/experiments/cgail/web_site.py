@@ -86,14 +86,14 @@ def initial_states(tr) -> list[dict]:
 
 def site_meta(tr, model, checkpoint: str | None) -> dict:
     from charctl.experiments.cgail.features import DISC_OBS_DIM
-    from charctl.experiments.cgail.rules import ready_waits
+    from charctl.experiments.cgail.skills import skills_that_wait
     from charctl.motion.skeleton import load_skeleton
 
     skel = load_skeleton()
     env = tr.cfg.env
     keys = [str((i + 1) % 10) for i in range(min(10, len(tr.skill_names)))]
     skills = tr.agent.skills  # with the checkpoint's ways back (env.clip_return_after_coverage)
-    waits = ready_waits([s.heading_goal for s in skills], [s.has_return for s in skills], env.ready_with_return)
+    waits = skills_that_wait(skills, bool(env.ready_with_return))
     return {
         "format": 1,
         "run": tr.run_dir.name,
