@@ -163,7 +163,7 @@ ANY_VALUE = object()  # a removed key whose every value behaves as the code that
 @dataclass(frozen=True)
 class RemovedKeys:
     """Keys a schema no longer has, so that the config.yaml of a run recorded before still opens
-    (`drop_removed_keys`): a schema lists them as its class attribute `REMOVED`."""
+    (`drop_removed_keys`): a schema lists them, one batch per removal, as its class attribute `REMOVED` (a tuple)."""
 
     date: str  # when they were removed
     commit: str  # the last commit that had them: a run that used one is evaluated with charctl there
@@ -173,13 +173,21 @@ class RemovedKeys:
 def drop_removed_keys(cfg, schema: type, source: str | Path) -> None:
     """Delete, in place, from a recorded run's config the keys `schema.REMOVED` lists when they hold their
     neutral value (the run behaves as the code that remains). A run that set one to anything else cannot
-    be rebuilt by this code: a one-line error naming the commit that still can. `source`: the run's folder,
-    for the message. Called where a recorded run is opened (charctl.runs.open_run)."""
+    be rebuilt by this code: a one-line error naming the commit that still can (the oldest such batch's).
+    `source`: the run's folder, for the message. Called where a recorded run is opened (charctl.runs.open_run)."""
+    for removed in getattr(schema, "REMOVED", ()):
+        used = _drop_batch(cfg, removed)
+        if used:
+            raise CharctlError(
+                f"{source}: this run used {', '.join(used)}, removed on {removed.date}; "
+                f"evaluate it with charctl at commit {removed.commit}"
+            )
+
+
+def _drop_batch(cfg, removed: RemovedKeys) -> list[str]:
+    """Delete one batch's keys from `cfg`; returns `key=value` of those set to a value other than their neutral one."""
     from omegaconf import OmegaConf
 
-    removed: RemovedKeys | None = getattr(schema, "REMOVED", None)
-    if removed is None:
-        return
     used = []
     for key, neutral in removed.neutral.items():
         section, _, leaf = key.rpartition(".")
@@ -190,11 +198,7 @@ def drop_removed_keys(cfg, schema: type, source: str | Path) -> None:
         if neutral is not ANY_VALUE and value != neutral:
             used.append(f"{key}={str(value).lower() if isinstance(value, bool) else value}")
         del node[leaf]
-    if used:
-        raise CharctlError(
-            f"{source}: this run used {', '.join(used)}, removed on {removed.date}; "
-            f"evaluate it with charctl at commit {removed.commit}"
-        )
+    return used
 
 
 def expand_multirun(overrides: list[str]) -> list[list[str]]:

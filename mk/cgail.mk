@@ -328,33 +328,3 @@ repro-cgail-spindance-probes: install ## cgail: spindance alone, tracking + pose
 	$(CHARCTL) train cgail "use_skills=[spindance]" reward.w_style=0 train.total_samples=6000000 train.fidelity_every=1000000 seed=1 output_root=$(CGAIL_FID)/spindance/recipe-nostyle
 	$(CHARCTL) train cgail "use_skills=[spindance]" reward.w_track=4.0 train.total_samples=6000000 train.fidelity_every=1000000 seed=1 output_root=$(CGAIL_FID)/spindance/recipe-track4
 	for d in tracking-term recipe recipe-nostyle recipe-track4; do T=$$(ls -d $(CGAIL_FID)/spindance/$$d/cgail/*/ | tail -1); $(CHARCTL) eval $$T --fidelity -k 4 || exit 1; done
-
-# The ready start (docs/cgail.md, "A ready start"): run H's command plus the moving walk reference (which learned the
-# walk at both seeds and lost the kick's second pass at both) and env.ready_radius=0.3: a kick reference that restarts
-# at frame 0 (its next pass, or a ramp into it) waits up to env.ready_wait_steps (1 s) for the character to come within
-# 0.3 m of the clip's first pose. Evaluated with every ordered switch (--switch-matrix). Run 2026-12-06 at seed 2: walk
-# and run learned, the kick not by 4e7, no switch of the matrix performed; not adopted.
-.PHONY: repro-cgail-3skill-ready
-repro-cgail-3skill-ready: install ## cgail: run H's command with reward.goal_reference_window=3 and env.ready_radius=0.3 at seed CGAIL_SEED (4e7 samples; ~75 min on 2 cores), evaluated with the switch matrix
-	$(CHARCTL) train cgail reward.goal_reference_window=3 env.ready_radius=0.3 train.total_samples=$(CGAIL_FID_SAMPLES) train.checkpoint_every=20 train.keep_checkpoint_every=2500000 seed=$(CGAIL_SEED) output_root=$(CGAIL_FID)/ready-seed$(CGAIL_SEED)
-	O=$$(ls -d $(CGAIL_FID)/ready-seed$(CGAIL_SEED)/cgail/*/ | tail -1); \
-	$(call cgail-evaluate,$$O) && $(CHARCTL) eval $$O --switch-matrix -k 8 -o $$O/eval/matrix && $(PY) scripts/check_targets_cgail.py $$O/eval --out $$O/eval/targets.md
-
-# The late-switch command (repro-cgail-3skill-return-gated-switch) with the ready start after ramps only
-# (env.ready_radius=0.3 env.ready_after_pass=false): continued 5e6 samples from late-switch seed 2's 4e7 state, it kept
-# the kick -> run switch (7 of 8) that a plain continuation lost (0 of 8) and raised the kick's no-fall to 1.000.
-# From scratch here (docs/cgail.md, "A ready start").
-.PHONY: repro-cgail-3skill-late-switch-ready
-repro-cgail-3skill-late-switch-ready: install ## cgail: the late-switch command with the ready start after ramps only at seed CGAIL_SEED (4e7 samples; ~100 min on 2 cores), evaluated with the switch matrix
-	$(CHARCTL) train cgail env.own_start_weight=0.25 env.own_start_by_success=true env.own_start_floor=0.4 reward.goal_reference_window=3 env.clip_return_seconds=0.5 env.clip_return_after_coverage=0.5 env.switch_prob_after_returns=0.03 env.ready_radius=0.3 env.ready_after_pass=false train.total_samples=$(CGAIL_FID_SAMPLES) train.checkpoint_every=20 train.keep_checkpoint_every=2500000 seed=$(CGAIL_SEED) output_root=$(CGAIL_FID)/late-switch-ready-seed$(CGAIL_SEED)
-	O=$$(ls -d $(CGAIL_FID)/late-switch-ready-seed$(CGAIL_SEED)/cgail/*/ | tail -1); \
-	$(call cgail-evaluate,$$O) && $(CHARCTL) eval $$O --switch-matrix -k 8 -o $$O/eval/matrix && $(PY) scripts/check_targets_cgail.py $$O/eval --out $$O/eval/targets.md
-
-# The same with the wait switched on per skill with its way back (env.ready_with_return=true: the kick's reference
-# waits after a ramp only once its training coverage reached 0.5), so the first kick is learned as in the
-# late-switch command (docs/cgail.md, "A ready start").
-.PHONY: repro-cgail-3skill-ready-with-return
-repro-cgail-3skill-ready-with-return: install ## cgail: the late-switch command with the ready start after ramps, on with the kick's way back, at seed CGAIL_SEED (4e7 samples; ~95 min on 2 cores), evaluated with the switch matrix
-	$(CHARCTL) train cgail env.own_start_weight=0.25 env.own_start_by_success=true env.own_start_floor=0.4 reward.goal_reference_window=3 env.clip_return_seconds=0.5 env.clip_return_after_coverage=0.5 env.switch_prob_after_returns=0.03 env.ready_radius=0.3 env.ready_after_pass=false env.ready_with_return=true train.total_samples=$(CGAIL_FID_SAMPLES) train.checkpoint_every=20 train.keep_checkpoint_every=2500000 seed=$(CGAIL_SEED) output_root=$(CGAIL_FID)/ready-with-return-seed$(CGAIL_SEED)
-	O=$$(ls -d $(CGAIL_FID)/ready-with-return-seed$(CGAIL_SEED)/cgail/*/ | tail -1); \
-	$(call cgail-evaluate,$$O) && $(CHARCTL) eval $$O --switch-matrix -k 8 -o $$O/eval/matrix && $(PY) scripts/check_targets_cgail.py $$O/eval --out $$O/eval/targets.md

@@ -88,18 +88,22 @@ def _recorded_run(tmp_path: Path, section: str = "", key: str = "", value=None) 
 
 def test_a_recorded_config_with_the_removed_keys_at_their_neutral_values_opens(tmp_path):
     """The removed knobs at the values that behave as the code that remains are dropped when the run is opened
-    (its config.yaml is left as it was); env.curriculum_samples has no effect with the curriculum off, so any
-    value of it is dropped."""
+    (its config.yaml is left as it was); env.curriculum_samples has no effect with the curriculum off, nor
+    env.ready_wait_steps / ready_after_pass with the ready radius 0, so any value of them is dropped."""
     import yaml
     from omegaconf import OmegaConf
 
-    from charctl.experiments.cgail.config import REMOVED_KEYS, Config
+    from charctl.experiments.cgail.config import READY_START_KEYS, REMOVED_KEYS, Config
     from charctl.runs import open_run
 
     run = _recorded_run(tmp_path, "env", "curriculum_samples", 500_000)
+    written = yaml.safe_load((run / "config.yaml").read_text())
+    # a run recorded between the ready start's addition and its removal lists its keys: off, or inert with it off
+    written["env"].update(ready_radius=0.0, ready_wait_steps=6, ready_after_pass=False, ready_with_return=False)
+    (run / "config.yaml").write_text(yaml.safe_dump(written, sort_keys=False))
     before = (run / "config.yaml").read_text()
     recorded = yaml.safe_load(before)
-    for key in REMOVED_KEYS:  # the recorded config lists every removed key
+    for key in [*REMOVED_KEYS, *READY_START_KEYS]:  # the recorded config lists every removed key
         section, leaf = key.split(".")
         assert leaf in recorded[section]
         del recorded[section][leaf]
@@ -116,20 +120,26 @@ def test_a_recorded_config_with_the_removed_keys_at_their_neutral_values_opens(t
     assert (run / "config.yaml").read_text() == before
 
 
+FIRST, READY = ("2026-12-03", "8641215"), ("2026-12-07", "4c78237")  # the two removals: date, last commit with them
+
+
 @pytest.mark.parametrize(
-    "section, key, value, shown",
+    "section, key, value, shown, removal",
     [
-        ("disc", "learn_class_scale", True, "disc.learn_class_scale=true"),
-        ("disc", "objective", "bce", "disc.objective=bce"),
-        ("disc", "logit_reg", 0.05, "disc.logit_reg=0.05"),
-        ("disc", "demo_oversample", 4, "disc.demo_oversample=4"),
-        ("env", "curriculum_start_seconds", 0.5, "env.curriculum_start_seconds=0.5"),
+        ("disc", "learn_class_scale", True, "disc.learn_class_scale=true", FIRST),
+        ("disc", "objective", "bce", "disc.objective=bce", FIRST),
+        ("disc", "logit_reg", 0.05, "disc.logit_reg=0.05", FIRST),
+        ("disc", "demo_oversample", 4, "disc.demo_oversample=4", FIRST),
+        ("env", "curriculum_start_seconds", 0.5, "env.curriculum_start_seconds=0.5", FIRST),
+        ("env", "ready_radius", 0.3, "env.ready_radius=0.3", READY),
+        ("env", "ready_with_return", True, "env.ready_with_return=true", READY),
     ],
 )
-def test_a_run_that_used_a_removed_option_is_refused_in_one_line(tmp_path, section, key, value, shown):
+def test_a_run_that_used_a_removed_option_is_refused_in_one_line(tmp_path, section, key, value, shown, removal):
     from conftest import assert_one_line_error, charctl_in_process
 
     run = _recorded_run(tmp_path, section, key, value)
     res = charctl_in_process("eval", str(run), "--survival", "1", "-k", "1", cwd=tmp_path)
-    line = assert_one_line_error(res, f"this run used {shown}, removed on 2026-12-03", "at commit 8641215")
+    date, commit = removal
+    line = assert_one_line_error(res, f"this run used {shown}, removed on {date}", f"at commit {commit}")
     assert str(run) in line

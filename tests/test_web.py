@@ -281,13 +281,6 @@ def test_onnx_graph_in_onnxruntime_web_equals_the_python_features(served, traine
     assert np.abs(out["probs"] - probs).max() < 1e-5
     assert np.abs(out["ctrl"] - want["action"]).max() < 1e-5  # float32 networks: kernels differ in rounding only
     np.testing.assert_array_equal(out["fell"] > 0.5, want["fell"])
-    # the ready start's pose error against the commanded clip's first frame (root height unscaled, as in evaluation)
-    from charctl.experiments.cgail.rules import reference_pose_error
-
-    first = np.stack([np.asarray(s.obs[0], dtype=np.float64) for s in trained.agent.skills])
-    start_err = reference_pose_error(want["obs"], first[inputs[names.index("skill_to")].astype(int)])
-    assert start_err.min() < 0.3 < start_err.max()  # some poses near a first frame, some far
-    np.testing.assert_allclose(out["start_err"], start_err, atol=1e-5)
 
 
 # ---------------------------------------------------------------------------- Node: the page's simulation module
@@ -430,23 +423,20 @@ def test_amp_page_restarts_in_the_pressed_skill(served_amp, tmp_path):
 
 # ---------------------------------------------------------------------------- env.phase_obs in the page
 PHASE_SCHEDULE = [(0.0, "right_kick"), (0.3, "walk"), (0.5, "right_kick")]
-READY = 0.3, 6  # env.ready_radius (m), env.ready_wait_steps
 
 
-def test_a_phase_obs_run_plays_in_node_with_the_envs_phase_and_ready_start(tmp_path):
-    """A tiny run trained with env.phase_obs and the ready start (ramp of 4 frames; radius 0.3 m, at most 6 steps):
-    exported with --web, its graph takes the `phase` input and web/sim.js keeps the reference frame as the env does,
-    holding the kick's frame 0 after the ramp into it until the graph's start_err is within the radius or the wait
-    ends. Over a kick -> walk -> kick schedule the phase in every state Node feeds the graph equals the Python env's,
-    step by step, up to the first termination of the Python rollout (the env resets a fallen character, the page
-    does not)."""
+def test_a_phase_obs_run_plays_in_node_with_the_envs_phase(tmp_path):
+    """A tiny run trained with env.phase_obs (ramp of 4 frames): exported with --web, its graph takes the
+    `phase` input and web/sim.js keeps the reference frame as the env does. Over a kick -> walk -> kick schedule
+    the phase in every state Node feeds the graph equals the Python env's, step by step, up to the first
+    termination of the Python rollout (the env resets a fallen character, the page does not)."""
     from charctl.experiments.cgail.policy import load_trained_run
     from charctl.experiments.cgail.web_graph import graph_inputs
 
     root = tmp_path / "runs"
     res = run_charctl(
         "train", "cgail", "scale=smoke", "use_skills=[walk,right_kick]", "env.phase_obs=true", "env.ramp_frames=4",
-        f"env.ready_radius={READY[0]}", f"env.ready_wait_steps={READY[1]}", f"output_root={root}", timeout=600,
+        f"output_root={root}", timeout=600,
     )  # fmt: skip
     assert res.returncode == 0, res.stdout + res.stderr
     (run,) = (root / "cgail").iterdir()
@@ -455,8 +445,6 @@ def test_a_phase_obs_run_plays_in_node_with_the_envs_phase_and_ready_start(tmp_p
     assert res.returncode == 0, res.stdout + res.stderr
     meta = json.loads((site / "meta.json").read_text())
     assert meta["phase_obs"] is True and [s["loops"] for s in meta["skills"]] == [True, False]
-    assert (meta["ready_radius"], meta["ready_wait_steps"], meta["ready_after_pass"]) == (*READY, True)
-    assert [s["ready_waits"] for s in meta["skills"]] == [False, True]  # the walk has a heading goal
     import onnx
 
     assert [i.name for i in onnx.load(str(site / "policy.onnx")).graph.input] == list(graph_inputs(True))
@@ -468,8 +456,6 @@ def test_a_phase_obs_run_plays_in_node_with_the_envs_phase_and_ready_start(tmp_p
     node("node_rollout.mjs", "--site", str(site), "--ref", str(ref), "--out", str(out))
     got = np.array(json.loads(out.read_text())["phases"])[: len(want)]
     print(f"phase compared over {len(want)} control steps; max |Node - Python| {np.abs(got - want).max():.1e}")
-    print("phase cos per step:", np.round(want[:, 0], 2).tolist())
-    assert len(want) >= 30  # past the first switch (step 9) and the second (15), into the restarted kick's wait
+    assert len(want) >= 20  # past the first switch (step 9) and the second (15), into the restarted kick
     assert (want[:9, 0] != 0).all() and (want[10:14] == 0).all()  # kick: a phase; walk: none; ramp: none
-    assert (want[15:, 0] == 1.0).sum() >= 3  # the restarted kick held frame 0 for a while
     np.testing.assert_allclose(got, want, atol=1e-12)

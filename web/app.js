@@ -289,13 +289,11 @@ function buildPanel(worker, meta) {
   });
 }
 
-// the commanded clip's timed reference as the policy's phase sees it: its frame, or that it waits for a ramp or
-// (env.ready_radius) for the character to reach the clip's first pose
+// the commanded clip's timed reference as the policy's phase sees it: its frame, or that it waits for a ramp
 function referenceText(meta, s) {
   const k = meta.skills[s.skill];
   if (k.heading_goal) return 'none (heading goal)';
   if (!s.refActive) return 'waits for the ramp';
-  if (s.refWait > 0) return `frame 0 of ${k.clip_frames}, waiting for the first pose (${s.refWait} steps left)`;
   return `frame ${s.refFrame} of ${k.clip_frames}`;
 }
 

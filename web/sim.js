@@ -59,12 +59,6 @@ export class Character {
     this.clipFrames = meta.skills.map((s) => s.clip_frames ?? 1);
     this.clipLoops = meta.skills.map((s) => Boolean(s.loops));
     this.hasGoal = meta.skills.map((s) => Boolean(s.heading_goal));
-    // env.ready_radius (m; 0 off): a reference that restarts at frame 0 for a skill without a heading goal holds
-    // there until the graph's start_err is below the radius or ready_wait_steps have passed (rules.ready_update)
-    this.readyRadius = meta.ready_radius ?? 0;
-    this.readyWaitSteps = meta.ready_wait_steps ?? 30;
-    this.readyAfterPass = meta.ready_after_pass ?? true;
-    this.readyWaits = meta.skills.map((s) => s.ready_waits ?? !s.heading_goal); // rules.ready_waits, per skill
     this.falls = 0;
     this.fallen = false;
     this.steps = 0;
@@ -100,8 +94,6 @@ export class Character {
     this.prevObs = null; // the first classifier pair is (o_0, o_0)
     this.refFrame = frame;
     this.refActive = true;
-    this.refWait = 0; // control steps the reference still holds frame 0 (env.ready_radius)
-    this.checkReady = false; // the wait the env checks against the pose after this step (see step())
     this.statePhase = this._phase(); // the phase the next state carries (latched, as the goal)
     this.pushes = [];
     this.fallen = false;
@@ -166,29 +158,12 @@ export class Character {
     return [Math.cos(a), Math.sin(a)];
   }
 
-  // One frame on (env._advance_phase with restart): a looping clip wraps, a non-looping one starts again at 0;
-  // a waiting reference holds frame 0 (rules.hold_reference), and with ready_after_pass a restart waits
+  // One frame on (env._advance_phase with restart): a looping clip wraps, a non-looping one starts again at 0
   _advancePhase() {
-    if (this.refWait > 0) return;
     const k = this.skillTo;
     const last = Math.max(this.clipFrames[k] - 1, 1);
     const next = this.refFrame + 1;
-    const restarted = !this.clipLoops[k] && next > last;
-    this.refFrame = this.clipLoops[k] ? next % last : restarted ? 0 : next;
-    if (restarted && this.readyRadius > 0 && this.readyAfterPass) this._startWaiting();
-  }
-
-  // rules.start_waiting: a reference starting at frame 0 waits for the character where its skill's restarts wait
-  // (no heading goal; with env.ready_with_return, once the skill's way back is on)
-  _startWaiting() {
-    this.refWait = this.readyWaits[this.skillTo] ? this.readyWaitSteps : 0;
-  }
-
-  // rules.ready_update on the pose error `err` (m) against the clip's frame 0: start within the radius or on the
-  // last waiting step, else count down
-  _readyUpdate(err) {
-    if (err < this.readyRadius || this.refWait <= 1) this.refWait = 0;
-    else this.refWait -= 1;
+    this.refFrame = this.clipLoops[k] ? next % last : next > last ? 0 : next;
   }
 
   // Evaluate the graph on the current state (no stepping); the first call after a reset uses o_0 as
@@ -208,7 +183,6 @@ export class Character {
       probs: get('probs'),
       style: out.style.data[0],
       fell: out.fell.data[0] > 0.5,
-      startErr: out.start_err.data[0],
     };
     return this.last;
   }
@@ -221,9 +195,6 @@ export class Character {
     const t0 = now();
     const out = await this.evaluate();
     const t1 = now();
-    // the env checks a waiting reference at the end of a step, on the pose the step ends in: the pose this
-    // evaluation saw, so the check of the previous step is made here, before this step's frame advances
-    if (this.checkReady) this._readyUpdate(out.startErr);
     if (out.fell && !this.fallen) {
       this.falls += 1;
       this.fallen = true;
@@ -255,14 +226,12 @@ export class Character {
     this.stateGoalYaw = this.goalYaw;
     this._advancePhase();
     this.statePhase = this._phase();
-    this.checkReady = this.readyRadius > 0 && this.refActive && this.refWait > 0;
     this.prevObs = out.obs;
     if (this.rampFrames > 0) this.w = Math.min(1, this.w + 1 / this.rampFrames);
     else this.w = 1;
     if (!this.refActive && this.w >= 1) {
       this.refFrame = 0;
       this.refActive = true;
-      if (this.readyRadius > 0) this._startWaiting(); // env._restart_reference_after_ramp
     }
     this.steps += 1;
     this.time = this.steps * this.controlDt;

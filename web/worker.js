@@ -62,7 +62,6 @@ function status() {
     w: sim.w,
     refFrame: sim.refFrame,
     refActive: sim.refActive,
-    refWait: sim.refWait,
     falls: sim.falls,
     fallen: sim.fallen,
     root: sim.rootPosition(),

@@ -128,31 +128,6 @@ class EnvConfig:
     # 4e7, the walk -> kick switch 32 of 32 with the ramp; not in the small preset until seed 2 passes too
     # (docs/cgail.md, "More switches once the way back is on").
     switch_prob_after_returns: float = ranged(0.0, ge=0, le=1)
-    # A ready start for the timed reference (skills without a heading goal): where it restarts at frame 0 (a clip's
-    # next pass, or the end of a command ramp into the skill) it holds frame 0 until the character's pose is within
-    # this many metres of it (`rules.reference_pose_error`: hands, feet and root height against the clip's first
-    # frame) or env.ready_wait_steps have passed, then runs; while it holds, the phase shows frame 0 and the pose
-    # check waits (its grace steps start when the clip does). So a kick commanded from the run starts once the
-    # character is in its guard instead of at a fixed time after the ramp, and a second pass starts from the
-    # policy's own guard when it reaches it. A rule of the env, so evaluations use it too. 0 = off (the clip restarts
-    # on time, as in every run before this key, 2026-12-06). 0.3 as 5e6 samples on the late-switch seed-2 run: the
-    # kick's passes and the walk -> kick switch from the policy's own guard, but then it stands in the guard when told
-    # to run; 0.3 from scratch at seed 2 (make repro-cgail-3skill-ready): no kick by 4e7. Not in the small preset.
-    # docs/cgail.md, "A ready start".
-    ready_radius: float = ranged(0.0, ge=0)
-    ready_wait_steps: int = ranged(30, ge=1)  # control steps (1 s at 30 Hz) the reference waits at most
-    # With env.ready_radius: false = the reference waits only where a command ramp into the skill ends (a switch); a
-    # pass that ends restarts on time, as without the radius. After every pass the late-switch run's character learned
-    # to stand in the clip's first pose and not to leave it for the run; a plain continuation did too, and false kept
-    # the kick -> run switch (7 of 8) in a 5e6-sample continuation at seed 2 (docs/cgail.md, "A ready start").
-    ready_after_pass: bool = True
-    # With env.ready_radius and env.clip_return_after_coverage: a skill's reference waits only once its way back is on
-    # (its training coverage reached the gate), so the first kick is learned as without the ready start (the runs from
-    # scratch with the wait from the first sample had not learned the kick at 4e7, seed 2, or 2.4e7, seed 1). Emulated
-    # at seed 1 (the late-switch run's 2.75e7 state continued with the wait to 4e7): the kick after a ramp came late
-    # (walk -> kick 0 of 8 in 3 s), walk -> run lost, kick -> walk gained; not adopted (docs/cgail.md, "The ready start
-    # after ramps, at seed 1").
-    ready_with_return: bool = False
     action_scale: float = ranged(1.0, gt=0)  # PD target (rad) = rest pose + action_scale * action
     fall_tolerance: float = ranged(0.005, ge=0)  # m: a non-foot body this close to the ground ends the episode (a fall)
     goal_max_angle_deg: float = 45.0  # new heading goals lie within +- this angle of the current heading
@@ -298,10 +273,24 @@ REMOVED_KEYS: dict[str, object] = {
     "env.curriculum_samples": ANY_VALUE,  # its length in samples: no effect with the curriculum off
 }
 
+# The ready start, removed on 2026-12-07 with its code, the web demo's support for it and its make targets
+# (docs/cgail.md, "A ready start" and "The ready start after ramps, at seed 1": worse than no wait at seed 1, from
+# scratch and switched on with the way back; from scratch at seed 2 no kick by 4e7); commit 4c78237 still has them.
+READY_START_KEYS: dict[str, object] = {
+    "env.ready_radius": 0.0,  # m: a restarted reference held frame 0 until the pose was this close; 0 = off
+    "env.ready_wait_steps": ANY_VALUE,  # the longest wait: no effect with the radius 0
+    "env.ready_after_pass": ANY_VALUE,  # whether a pass's restart waited too: no effect with the radius 0
+    "env.ready_with_return": False,  # the wait only once a skill's way back was on
+}
+
 
 @dataclass
 class Config(BaseConfig):
-    REMOVED = RemovedKeys("2026-12-03", "8641215", REMOVED_KEYS)  # not a field: charctl.config.drop_removed_keys
+    # not a field: charctl.config.drop_removed_keys, one batch per removal
+    REMOVED = (
+        RemovedKeys("2026-12-03", "8641215", REMOVED_KEYS),
+        RemovedKeys("2026-12-07", "4c78237", READY_START_KEYS),
+    )
 
     experiment: str = "cgail"
     skills: list[SkillConfig] = field(default_factory=paper_skills)  # the commandable skills: name, clip, heading goal
@@ -467,16 +456,6 @@ def _check_env(cfg) -> str | None:
                 "env.own_start_weight > 0 needs a reference that restarts at frame 0: reward.kind=adversarial with "
                 "env.phase_obs=true or reward.pose_error_threshold > 0, and reward.pose_error_grace_steps >= 1"
             )
-    if env.ready_with_return and (env.ready_radius <= 0 or env.clip_return_after_coverage <= 0):
-        return (
-            "env.ready_with_return starts the ready start with each skill's way back: set env.ready_radius > 0 and "
-            "env.clip_return_after_coverage > 0 with it"
-        )
-    if env.ready_radius > 0 and (cfg.reward.kind != "adversarial" or not timed):
-        return (
-            "env.ready_radius holds a timed reference that restarts at frame 0: reward.kind=adversarial with "
-            "env.phase_obs=true or reward.pose_error_threshold > 0"
-        )
     return None
 
 

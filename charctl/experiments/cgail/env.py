@@ -45,22 +45,19 @@ from charctl.experiments.cgail.rules import (
     goal_features,
     goal_reference_frame,
     goal_reward,
-    hold_reference,
     phase_features,
     pose_key_error_frames,
     pose_keys,
-    ready_update,
     reference_pose_error,
     restart_after_ramp,
     root_height_scale,
-    start_waiting,
     state_dim,
     switch_commands,
     tracking_reward,
     update_fall_rates,
     yaw_scale,
 )
-from charctl.experiments.cgail.skills import SkillData, skills_that_wait
+from charctl.experiments.cgail.skills import SkillData
 from charctl.experiments.cgail.step_result import StepResult
 from charctl.motion.array_compat import namespace, rotations_for
 
@@ -105,11 +102,6 @@ class CgailEnv:
         # env.phase_obs: the timed reference's phase in the state of the adversarial policy (training and evaluation)
         self.phase_obs = bool(getattr(env_cfg, "phase_obs", False)) and not tracking
         self.timed_reference = self.pose_threshold > 0 or self.phase_obs  # reference advanced, restarting at frame 0
-        # env.ready_radius (m): a restarted reference holds frame 0 until the pose is this close (or for
-        # env.ready_wait_steps); 0 = it runs on time
-        self.ready_radius = float(getattr(env_cfg, "ready_radius", 0.0)) if self.timed_reference else 0.0
-        self.ready_wait = int(getattr(env_cfg, "ready_wait_steps", 30))
-        self.ready_after_pass = bool(getattr(env_cfg, "ready_after_pass", True))  # false: only after a ramp
         self.conditional = conditional
         self.K = len(skills)
         self.N = int(env_cfg.num_envs)
@@ -165,8 +157,6 @@ class CgailEnv:
         self.rsi_frames = a.array([len(s.qpos) for s in skills], i64)
         self.clip_loops = a.array([s.loop for s in skills], a.bool_dtype)
         self.has_goal = a.array([s.heading_goal for s in skills], a.bool_dtype)
-        waits = skills_that_wait(skills, bool(self.cfg.ready_with_return))
-        self.ready_skills = a.array(waits, a.bool_dtype)  # env.ready_radius: the skills whose restarts wait
         self.speed = a.array([s.mean_speed for s in skills], a.dtype)
         clips = np.array([len(s.obs) for s in skills]), np.array([s.loop for s in skills])
         lead = start_frames.lead_window_index(*clips, self.cfg.start_failure_lead)
@@ -201,7 +191,6 @@ class CgailEnv:
         self.ref_frame = a.zeros(N, i64)  # reference clip frame at the current phase
         self.ref_active = a.array([True] * N, a.bool_dtype)  # pose-error check: reference valid (off during a switch)
         self.ref_grace = a.zeros(N, i64)  # pose-error check: steps left without a check
-        self.ref_wait = a.zeros(N, i64)  # env.ready_radius: steps the reference still holds frame 0 (0: running)
         self.yaw_err = a.zeros(N, f)  # reward.yaw_error_threshold: heading gained on the reference (rad)
         self.fall_rate = a.array([0.5] * self.K, f64)  # per-skill recent failure rate (env.skill_fall_weight)
         # env.start_failure_weight: failures per skill and reference frame (start_frames.py)
@@ -210,7 +199,6 @@ class CgailEnv:
         self.start_frame: int | None = None  # evaluation: RSI from this clip frame instead of a random one
         self.random_yaw = True  # RSI turns the character by a random yaw (training); off for evaluation
         self._falls = a.zeros((), i64)
-        self._ready_counts = a.zeros(2, i64)  # env.ready_radius: references started, of them timed out
         self._state = a.zeros((N, self.state_dim), a.net_dtype)
         self._obs = a.zeros((N, DISC_OBS_DIM), a.net_dtype)
 
@@ -293,7 +281,6 @@ class CgailEnv:
         self.ref_frame = rows.put(self.ref_frame, frames)
         self.ref_active = rows.put(self.ref_active, True)
         self.ref_grace = rows.put(self.ref_grace, grace)
-        self.ref_wait = rows.put(self.ref_wait, 0)
         self.yaw_err = rows.put(self.yaw_err, 0.0)
         k = self.arrays.kinematics(None if isinstance(rows, MaskRows) else rows)
         self.goal_angle = rows.put(self.goal_angle, R.yaw_about_y(k.body_rot[:, 0]) + goal_offset)
@@ -327,16 +314,11 @@ class CgailEnv:
         baseline truncates there) or, with `restart` (the pose-error reference), starts again at frame 0 with
         grace steps."""
         cmd = self.cmd
-        frame = self.ref_frame
-        self.ref_frame, ended, again = advance_reference(frame, self.clip_loops[cmd], self.clip_frames[cmd], restart)
+        self.ref_frame, ended, again = advance_reference(
+            self.ref_frame, self.clip_loops[cmd], self.clip_frames[cmd], restart
+        )
         if restart:
-            held = None
-            if self.ready_radius > 0:  # a waiting reference holds frame 0 and its grace steps
-                held = self.ref_wait > 0
-                self.ref_frame, again = hold_reference(frame, self.ref_frame, again, self.ref_wait)
-            self.ref_grace = count_down_grace(self.ref_grace, again, self.pose_grace, held)
-            if self.ready_radius > 0 and self.ready_after_pass:
-                self.ref_wait = start_waiting(self.ref_wait, again, self.ready_skills[cmd], self.ready_wait)
+            self.ref_grace = count_down_grace(self.ref_grace, again, self.pose_grace)
         return self._reference_obs(), ended
 
     def _reference_obs(self, frames=None):
@@ -365,33 +347,10 @@ class CgailEnv:
         return rows.put(timed, closest), rows.put(ref, self.ref_obs[cmd, best])
 
     def _restart_reference_after_ramp(self) -> None:
-        """Envs whose command ramp has just finished: the new clip's reference starts at frame 0 (with
-        env.ready_radius, waits there for the character)."""
-        was_active = self.ref_active
+        """Envs whose command ramp has just finished: the new clip's reference starts at frame 0."""
         self.ref_frame, self.ref_grace, self.ref_active = restart_after_ramp(
             self.ref_frame, self.ref_grace, self.ref_active, self.w, self.pose_grace
         )
-        if self.ready_radius > 0:
-            starting = self.ref_active & ~was_active
-            self.ref_wait = start_waiting(self.ref_wait, starting, self.ready_skills[self.cmd], self.ready_wait)
-
-    def _start_when_ready(self, obs, ref) -> None:
-        """env.ready_radius: the waiting references whose character is within the radius of frame 0 (`ref`, the
-        (N, 133) timed reference; `obs` the disc observations after the step) start (`rules.ready_update`)."""
-        err = reference_pose_error(obs, ref, self.root_scale)
-        self.ref_wait, self.ref_grace, started = ready_update(
-            self.ref_wait, self.ref_grace, self.ref_active, err, self.ready_radius, self.pose_grace
-        )
-        self._ready_counts = self._ready_counts + namespace(err).stack(
-            [started.sum(), (started & (err >= self.ready_radius)).sum()]
-        )
-
-    def take_ready_counts(self) -> tuple[int, int]:
-        """env.ready_radius: (references started, of them on the last waiting step, not within the radius) since the
-        last call (which reads them back from the device and sets them to 0)."""
-        starts, timeouts = (int(c) for c in self._ready_counts.tolist())
-        self._ready_counts = self._ready_counts * 0
-        return starts, timeouts
 
     @property
     def state(self):
@@ -430,8 +389,6 @@ class CgailEnv:
         pose_ended, scored = no_pose_end, None
         if self.pose_threshold > 0:
             r_track, pose_ended, scored = env_reference_check(self, pair_next, ref, r_track, fell, unstable)
-        if self.ready_radius > 0:
-            self._start_when_ready(pair_next, ref)
         self.steps = self.steps + 1
         terminated, truncated = episode_end(fell, unstable, pose_ended, self.steps, self.max_steps, clip_ended)
         self._falls = self._falls + fell.sum()
@@ -479,8 +436,6 @@ class CgailEnv:
         """env.own_start_weight: keep the physics states of the envs whose timed reference restarted at frame 0 this
         step (`own_starts.restarted_here`), except those that ended and skills with a heading goal."""
         fresh = restarted_here(self.ref_grace, self.ref_active, self.pose_grace) & ~done & ~self.has_goal[self.cmd]
-        if self.ready_radius > 0:  # a waiting reference has not started yet: kept when it does
-            fresh = fresh & (self.ref_wait == 0)
         self.own_starts.keep(self.sim.qpos, self.sim.qvel, self.cmd, fresh)
 
     def _maybe_switch(self, mask) -> None:

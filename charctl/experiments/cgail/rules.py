@@ -308,53 +308,11 @@ def restart_after_ramp(
     )
 
 
-def hold_reference(frame: Array, advanced: Array, restarted: Array, ref_wait: Array) -> tuple[Array, Array]:
-    """env.ready_radius: (frame, restarted), both (N,), after one step of `advance_reference` (`advanced`,
-    `restarted`) from `frame`: an env whose reference waits (`ref_wait` > 0 control steps left) keeps its frame
-    (frame 0) and does not restart; the others take the step."""
-    xp = namespace(frame, ref_wait)
-    waiting = ref_wait > 0
-    return xp.where(waiting, frame, advanced), restarted & ~waiting
-
-
-def start_waiting(ref_wait: Array, starting: Array, waits: Array, wait_steps: int) -> Array:
-    """(N,) control steps the reference waits at frame 0 (env.ready_radius): `wait_steps` where it restarts at frame
-    0 this step (`starting`) for a skill whose reference waits (`waits`, `ready_waits`), 0 where it restarts for one
-    that does not (a heading goal: scored against its closest frame, nothing to wait for); the others keep theirs."""
-    xp = namespace(ref_wait, starting)
-    fresh = xp.where(waits, xp.full_like(ref_wait, wait_steps), xp.zeros_like(ref_wait))
-    return xp.where(starting, fresh, ref_wait)
-
-
-def ready_waits(heading_goal: list[bool], returning: list[bool], with_return: bool) -> list[bool]:
-    """Per skill, whether its restarted reference waits for the character (env.ready_radius): every skill without a
-    heading goal, or with env.ready_with_return only those of them whose way back is on (`returning`)."""
-    return [not g and (r or not with_return) for g, r in zip(heading_goal, returning, strict=True)]
-
-
-def ready_update(
-    ref_wait: Array, ref_grace: Array, ref_active: Array, err: Array, radius: float, grace: int
-) -> tuple[Array, Array, Array]:
-    """One control step of the ready start (env.ready_radius `radius` m): (ref_wait, ref_grace, started), all (N,).
-
-    An env whose running reference (`ref_active`) waits at frame 0 (`ref_wait` > 0) starts it (`started`) when its
-    pose error `err` (N,) m against frame 0 is below `radius` or on its last waiting step (`ref_wait` == 1): its wait
-    becomes 0 and its grace steps `grace` start now (the clip advances from the next step). Otherwise the wait counts
-    down. The grace steps of a waiting env stay where its restart set them (`grace`), so the pose check waits too."""
-    xp = namespace(ref_wait, err)
-    waiting = ref_active & (ref_wait > 0)
-    start = waiting & ((err < radius) | (ref_wait <= 1))
-    left = xp.where(start, xp.zeros_like(ref_wait), xp.where(waiting, ref_wait - 1, ref_wait))
-    return left, xp.where(start, xp.full_like(ref_grace, grace), ref_grace), start
-
-
-def count_down_grace(ref_grace: Array, restarted: Array, grace: int, held: Array | None = None) -> Array:
+def count_down_grace(ref_grace: Array, restarted: Array, grace: int) -> Array:
     """(N,) control steps left without a pose-error check after one step of the timed reference: `grace` where
-    the clip has just restarted at frame 0 (`restarted`, from `advance_reference`), unchanged where `held` (a
-    reference waiting at frame 0, env.ready_radius), else one fewer (not below 0)."""
+    the clip has just restarted at frame 0 (`restarted`, from `advance_reference`), else one fewer (not below 0)."""
     xp = namespace(ref_grace, restarted)
-    out = xp.where(restarted, xp.full_like(ref_grace, grace), xp.maximum(ref_grace - 1, xp.zeros_like(ref_grace)))
-    return out if held is None else xp.where(held, ref_grace, out)
+    return xp.where(restarted, xp.full_like(ref_grace, grace), xp.maximum(ref_grace - 1, xp.zeros_like(ref_grace)))
 
 
 def pose_check(

@@ -35,12 +35,6 @@ class SkillData:
     own_qvel: np.ndarray | None = None
     own_obs: np.ndarray | None = None
 
-    @property
-    def has_return(self) -> bool:
-        """Whether env.clip_return_seconds' way back is appended to this skill's reference (its frames run on past
-        the clip's own)."""
-        return len(self.obs) > self.clip_frames
-
     def clip_only(self) -> SkillData:
         """This skill's arrays as the clip alone (without env.clip_return_seconds' return): what the evaluations
         compare a policy with. The env's reference, RSI and demonstrations use all T frames."""
@@ -50,14 +44,6 @@ class SkillData:
         return dataclasses.replace(
             self, qpos=self.qpos[:n], qvel=qvel, obs=obs, local_rot=self.local_rot[:n], own_qvel=None, own_obs=None
         )
-
-
-def skills_that_wait(skills: list[SkillData], with_return: bool) -> list[bool]:
-    """Per skill, whether a restart of its reference waits for the character (env.ready_radius; `rules.ready_waits`
-    on the skills' heading goals and ways back, env.ready_with_return `with_return`)."""
-    from charctl.experiments.cgail.rules import ready_waits
-
-    return ready_waits([s.heading_goal for s in skills], [s.has_return for s in skills], with_return)
 
 
 def load_skills(

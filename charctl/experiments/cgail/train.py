@@ -251,10 +251,6 @@ class CgailLearner(AgentCounters):
             stats["train/own_start_states"] = float(env.own_starts.written)
             shares = env.own_start_shares().tolist()
             stats.update({f"own_start_share/{sk.name}": float(w) for sk, w in zip(agent.skills, shares)})
-        if env.ready_radius > 0:  # env.ready_radius: of the references that started, the share that waited in vain
-            starts, timeouts = env.take_ready_counts()
-            stats["train/ready_starts"] = float(starts)
-            stats["train/ready_timeout_share"] = timeouts / starts if starts else 0.0
         if agent.conditional:  # both envs keep per-skill failure rates (env.skill_fall_weight)
             stats.update({f"fall_rate/{sk.name}": float(r) for sk, r in zip(agent.skills, env.fall_rate.tolist())})
             stats["train/r_class"] = float(rew["r_class"].mean())

@@ -25,9 +25,6 @@ Outputs:
     obs (B, 133): the discriminator observation o_t; probs (B, K): softmax of the class head on
         (prev_obs, obs) (zeros for an AMP run); style (B,): r_S = clip(1 - (1 - D)^2 / 4, 0, 1) (eq 4.7)
     fell (B,): 1 where a non-foot geom is within env.fall_tolerance of the ground (the env's fall rule)
-    start_err (B,) m: the pose error of `obs` against the first frame of the commanded clip (skill_to), as the
-        evaluation env measures it for env.ready_radius (`rules.reference_pose_error`, root height unscaled): the page
-        starts a waiting reference when it is below the radius (web/sim.js)
 """
 
 from __future__ import annotations
@@ -47,7 +44,7 @@ from charctl.experiments.cgail.features import (
     heading_frame,
     policy_state,
 )
-from charctl.experiments.cgail.rules import goal_features, pose_key_error, pose_keys
+from charctl.experiments.cgail.rules import goal_features
 from charctl.motion import rotations_torch as RT
 from charctl.motion.skeleton import FEET, load_skeleton
 
@@ -65,7 +62,7 @@ INPUTS = (
     "goal_yaw",
     "prev_obs",
 )
-OUTPUTS = ("ctrl", "state", "command", "obs", "probs", "style", "fell", "start_err")
+OUTPUTS = ("ctrl", "state", "command", "obs", "probs", "style", "fell")
 
 # MuJoCo geom type codes (mjtGeom) of the humanoid's shapes
 _SPHERE, _CAPSULE, _BOX = 2, 3, 6
@@ -117,8 +114,6 @@ class WebGraph(nn.Module):
             "has_goal", torch.as_tensor([float(s.heading_goal) for s in tr.agent.skills], dtype=torch.float64)
         )
         self.register_buffer("skill_ids", torch.arange(self.K, dtype=torch.float64))
-        first = np.stack([np.asarray(s.obs[0], dtype=np.float64) for s in tr.agent.skills])  # (K, 133) clip frame 0
-        self.register_buffer("first_keys", pose_keys(torch.as_tensor(first)))  # (K, 13)
         self.policy = _MeanAction(tr.agent.model)
         self.action_scale = float(tr.cfg.env.action_scale)
         self.register_buffer("rest", torch.zeros(model.nu, dtype=torch.float64))
@@ -203,8 +198,7 @@ class WebGraph(nn.Module):
         else:
             probs = torch.zeros_like(command)
         fell = (self.lowest_heights(geom_xpos, geom_xmat) < self.fall_tolerance).any(dim=1).to(f64)
-        start_err = pose_key_error(pose_keys(obs), onehot_to @ self.first_keys)
-        return ctrl, state, command, obs, probs, style, fell, start_err
+        return ctrl, state, command, obs, probs, style, fell
 
 
 class _MeanAction(nn.Module):

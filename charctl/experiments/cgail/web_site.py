@@ -86,14 +86,11 @@ def initial_states(tr) -> list[dict]:
 
 def site_meta(tr, model, checkpoint: str | None) -> dict:
     from charctl.experiments.cgail.features import DISC_OBS_DIM
-    from charctl.experiments.cgail.skills import skills_that_wait
     from charctl.motion.skeleton import load_skeleton
 
     skel = load_skeleton()
     env = tr.cfg.env
     keys = [str((i + 1) % 10) for i in range(min(10, len(tr.skill_names)))]
-    skills = tr.agent.skills  # with the checkpoint's ways back (env.clip_return_after_coverage)
-    waits = skills_that_wait(skills, bool(env.ready_with_return))
     return {
         "format": 1,
         "run": tr.run_dir.name,
@@ -107,21 +104,15 @@ def site_meta(tr, model, checkpoint: str | None) -> dict:
                 "heading_goal": bool(s.heading_goal),
                 "clip_frames": len(s.obs),  # control frames of the clip: the phase's period (env.phase_obs)
                 "loops": bool(s.loop),
-                "ready_waits": waits[i],  # env.ready_radius: whether a restart of its reference waits
                 "key": keys[i] if i < 10 else "",
             }
-            for i, s in enumerate(skills)
+            for i, s in enumerate(tr.agent.skills)
         ],
         "physics_hz": float(env.physics_hz),
         "control_hz": float(env.control_hz),
         "armature": float(env.armature),
         "ramp_frames": int(env.ramp_frames),
         "phase_obs": bool(getattr(env, "phase_obs", False)),  # the policy state ends with the clip phase
-        # env.ready_radius (m; 0 off): the reference the phase shows holds frame 0 until the graph's start_err is below
-        # it, as in the evaluation env (whose only timed reference is the phase's)
-        "ready_radius": float(env.ready_radius) if env.phase_obs else 0.0,
-        "ready_wait_steps": int(env.ready_wait_steps),
-        "ready_after_pass": bool(env.ready_after_pass),
         "action_scale": float(env.action_scale),
         "fall_tolerance": float(env.fall_tolerance),
         "obs_dim": DISC_OBS_DIM,
