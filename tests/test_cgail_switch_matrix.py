@@ -1,6 +1,6 @@
 """`charctl eval RUN --switch-matrix`: the locomotion rule of `performed_after_switch` by hand-built motion, the
-last-second speed by hand values, and the matrix on the shipped three-skill policy against the single `--switch`
-study it extends (same rollouts, a longer window)."""
+last-second speed by hand values, the batched rollout of every pair against one rollout per pair, and the matrix on
+the shipped three-skill policy beside the single `--switch` study it extends (a longer window)."""
 
 from __future__ import annotations
 
@@ -60,13 +60,33 @@ def test_the_matrix_extends_the_switch_study_on_the_shipped_policy(tmp_path):
     pairs = {(p["from"], p["to"]): p for p in result["pairs"]}
     assert len(pairs) == 6 and all(0 <= p["performed"] <= p["trials"] == 2 for p in pairs.values())
     assert {p["rule"] for (a, b), p in pairs.items() if b in ("walk", "run")} == {"speed+coverage"}
-    # the same deterministic rollouts watched longer: each trial's kick foot peak is at least the single study's
+    # the same switch, judged by the same classifier: the kick's command is taken (P(kick) > 0.5) in both studies
     ramp = json.loads((single / "switch_walk_to_right_kick.json").read_text())["summary"]["ramp"]
     kick = pairs[("walk", "right_kick")]
-    assert np.all(np.array(kick["foot_peak"]) >= np.array(ramp["foot_peak"]) - 1e-9)
-    assert kick["latency_frames"] == ramp["latency_frames"]
+    assert len(kick["latency_frames"]) == len(ramp["latency_frames"]) == 2
+    assert all(x is not None for x in kick["latency_frames"] + ramp["latency_frames"])
     assert (matrix / "switch_matrix.png").stat().st_size > 5_000
     assert "Switch matrix" in (matrix / "report.md").read_text()
+
+
+def test_the_batched_rollout_of_all_pairs_is_each_pair_rolled_out_alone():
+    """`switch_rollout` of four pairs at once (2 trials each, 8 envs) against each pair rolled out alone. With the
+    heading-goal offset at 0 the rollouts draw no random number, so they may differ only by float32 sums that the
+    policy's batch size orders differently (measured: at most 1.2e-5 m over 5 s)."""
+    from charctl.experiments.cgail.rollouts import load_eval_run, switch_rollout
+
+    tr = load_eval_run(RUN, device="cpu")
+    tr.cfg.env.goal_max_angle_deg = 0.0
+    pairs = np.array([(0, 1), (0, 2), (2, 1), (1, 0)])  # walk -> run, walk -> kick, kick -> run, run -> walk
+    frames = dict(ramp=60, t_switch=30, t_end=150, perform_frames=120)
+    batched = switch_rollout(tr, pairs[:, 0], pairs[:, 1], 2, *frames.values())
+    assert batched.pos_after.shape == (120, 8, 15, 3) and batched.probs.shape == (150, 8, 3)
+    for p, (a, b) in enumerate(pairs):
+        alone = switch_rollout(tr, a, b, 2, *frames.values())
+        pair = batched.trials(slice(2 * p, 2 * p + 2))
+        np.testing.assert_allclose(pair.pos_after, alone.pos_after, atol=1e-4)
+        np.testing.assert_allclose(pair.probs, alone.probs, atol=1e-4)
+        np.testing.assert_array_equal(pair.alive_hist, alone.alive_hist)
 
 
 def test_an_amp_run_has_no_switch_matrix(tmp_path):

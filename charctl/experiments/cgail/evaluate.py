@@ -16,6 +16,7 @@ import shlex
 import sys
 from pathlib import Path
 
+import numpy as np
 import torch
 
 from charctl.checkpoints import checkpoint_file_name
@@ -114,15 +115,15 @@ def eval_switch_matrix(tr: DeviceRun, trials: int, out: Path, before_s: float = 
         raise CharctlError(f"{tr.run_dir} is an AMP run: it takes no command, so --switch-matrix does not apply")
     frames = switch_frames(tr, before_s, after_s, perform_seconds=None)
     names = tr.skill_names
-    cells = {}
     t_switch, ramp = frames["switch_frame"], frames["ramp_frames"]
-    pairs = [(i, j) for i in range(len(names)) for j in range(len(names)) if i != j]
-    with TrainingProgress(len(pairs), "switch matrix", unit="pairs") as bar:
-        for ka, kb in pairs:  # one rollout per pair: each draws the env's random numbers as `--switch` does
-            rec = _switch_recording(tr, ka, kb, trials, ramp, frames)
-            cell = switch_summary(tr, kb, rec, t_switch, ramp, trials, coverage_from=ramp)
-            cells[(names[ka], names[kb])] = cell
-            bar.update(1, pair=f"{names[ka]}->{names[kb]}", done=cell["performed"])
+    pairs = np.array([(i, j) for i in range(len(names)) for j in range(len(names)) if i != j])
+    # every pair at once, `trials` envs each: one batched rollout (`switch_rollout`), judged pair by pair
+    with TrainingProgress(frames["end_frame"], f"switch matrix ({len(pairs)} pairs x {trials})", unit="frames") as bar:
+        rec = _switch_recording(tr, pairs[:, 0], pairs[:, 1], trials, ramp, frames, progress=bar)
+    cells = {}
+    for p, (ka, kb) in enumerate(pairs):
+        pair = rec.trials(slice(p * trials, (p + 1) * trials))
+        cells[(names[ka], names[kb])] = switch_summary(tr, kb, pair, t_switch, ramp, trials, coverage_from=ramp)
     return write_switch_matrix(out, tr, cells, frames)
 
 
@@ -149,10 +150,11 @@ def switch_frames(
     }
 
 
-def _switch_recording(tr: DeviceRun, ka: int, kb: int, trials: int, ramp: int, frames: dict):
+def _switch_recording(tr: DeviceRun, ka, kb, trials: int, ramp: int, frames: dict, progress=None):
     hz = tr.cfg.env.control_hz
     t_switch, t_end = frames["switch_frame"], frames["end_frame"]
-    return switch_rollout(tr, ka, kb, trials, ramp, t_switch, t_end, int(round(frames["perform_seconds"] * hz)))
+    perform = int(round(frames["perform_seconds"] * hz))
+    return switch_rollout(tr, ka, kb, trials, ramp, t_switch, t_end, perform, progress)
 
 
 def eval_curves(run_dirs: list[Path], out: Path) -> dict:

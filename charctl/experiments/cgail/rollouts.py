@@ -22,6 +22,7 @@ from charctl.experiments.cgail.discriminator import blended_class_reward, style_
 from charctl.experiments.cgail.drive import policy_steps
 from charctl.experiments.cgail.env import CgailEnv
 from charctl.experiments.cgail.policy import TrainedRun, load_trained_run, local_joint_rotations
+from charctl.progress import TrainingProgress
 
 EVAL_OVERRIDES = ("output_root", "device")  # the only key=value overrides `charctl eval cgail` takes
 
@@ -153,15 +154,30 @@ class SwitchRecording:
     pos_after: np.ndarray  # (F, N, 15, 3) world bodies of the F frames after the switch (PERFORM window)
     rot_after: np.ndarray  # (F, N, 15, 4)
 
+    def trials(self, envs: slice) -> SwitchRecording:
+        """The recording of the envs `envs` only (one pair's trials of a batched `switch_rollout`)."""
+        return SwitchRecording(
+            self.probs[:, envs],
+            self.r_style[:, envs],
+            self.r_class[:, envs],
+            self.alive_hist[:, envs],
+            self.alive[envs],
+            self.alive_at_switch[envs],
+            self.pos_after[:, envs],
+            self.rot_after[:, envs],
+        )
 
-def switch_at(env: CgailEnv, kb: int, t_switch: int, ramp: int) -> Callable[[int], tuple[np.ndarray, ...]]:
-    """`before_step` of the switch study: at control step `t_switch` every env is commanded `kb` (ramped
-    when `ramp` > 0); each step's command state (A, B, w, blend c̄), read before the step, is returned."""
+
+def switch_at(env: CgailEnv, kb, t_switch: int, ramp: int) -> Callable[[int], tuple[np.ndarray, ...]]:
+    """`before_step` of the switch study: at control step `t_switch` every env is commanded `kb` (one skill index,
+    or (N,) one per env; ramped when `ramp` > 0); each step's command state (A, B, w, blend c̄), read before the
+    step, is returned."""
+    kb = np.broadcast_to(np.asarray(kb, dtype=np.int64), (env.N,)).copy()
 
     def before_step(t: int) -> tuple[np.ndarray, ...]:
         if t == t_switch:
             env.set_command(np.arange(env.N), kb, ramp=ramp > 0)
-            env.forced_command = np.full(env.N, kb)
+            env.forced_command = kb
         return env.prev_cmd.copy(), env.cmd.copy(), env.w.copy(), env.command_blend()
 
     return before_step
@@ -169,15 +185,27 @@ def switch_at(env: CgailEnv, kb: int, t_switch: int, ramp: int) -> Callable[[int
 
 @torch.no_grad()
 def switch_rollout(
-    tr: DeviceRun, ka: int, kb: int, trials: int, ramp: int, t_switch: int, t_end: int, perform_frames: int
+    tr: DeviceRun,
+    ka,
+    kb,
+    trials: int,
+    ramp: int,
+    t_switch: int,
+    t_end: int,
+    perform_frames: int,
+    progress: TrainingProgress | None = None,
 ) -> SwitchRecording:
-    """`trials` envs commanded with skill `ka`, switched to `kb` at frame `t_switch` (over `ramp` frames,
-    0: at once), recorded until frame `t_end`; bodies kept for the `perform_frames` after the switch."""
+    """`trials` envs per pair commanded with skill `ka`, switched to `kb` at frame `t_switch` (over `ramp` frames,
+    0: at once), recorded until frame `t_end`; bodies kept for the `perform_frames` after the switch. `ka`, `kb`:
+    one pair of skill indices, or P pairs as (P,) arrays, all rolled out at once in P x `trials` envs, pair-major
+    (pair p's trials are envs p * trials to (p + 1) * trials - 1: `SwitchRecording.trials`). `progress`, when
+    given, advances by one per control step."""
     hz = tr.cfg.env.control_hz
     episode_seconds = t_end / hz + 1.0
-    env = tr.held_env(np.full(trials, ka), episode_seconds, seed=7, ramp_frames=ramp)
+    ka, kb = (np.repeat(np.atleast_1d(np.asarray(k, dtype=np.int64)), trials) for k in (ka, kb))
+    env = tr.held_env(ka, episode_seconds, seed=7, ramp_frames=ramp)
     probs, rs, rc, alive_hist, pos_after, rot_after = [], [], [], [], [], []
-    alive = np.ones(trials, dtype=bool)
+    alive = np.ones(env.N, dtype=bool)
     for step in policy_steps(tr.agent, env, t_end, before_step=switch_at(env, kb, t_switch, ramp)):
         t, res, (cmd_a, cmd_b, w, blend) = step.t, step.result, step.before
         if t == t_switch:
@@ -200,6 +228,8 @@ def switch_rollout(
         if t_switch <= t < t_switch + perform_frames:  # bodies after the step, for the peaks
             pos_after.append(env.sim.body_pos.copy())
             rot_after.append(env.sim.body_quat_xyzw.copy())
+        if progress is not None:
+            progress.update(1)
     probs, rs, rc = (torch.stack(x).cpu().numpy() for x in (probs, rs, rc))
     return SwitchRecording(
         probs, rs, rc, np.array(alive_hist), alive, alive_at_switch, np.array(pos_after), np.array(rot_after)
