@@ -97,7 +97,8 @@ def rollout_skill(tr: DeviceRun, skill: int, episodes: int, seconds: float, seed
     env = tr.held_env(np.full(episodes, skill), seconds + 1.0, seed=seed)
     steps = int(round(seconds * env.cfg.control_hz))
     alive = np.ones(episodes, dtype=bool)
-    rots = [[local_joint_rotations(env)[i]] for i in range(episodes)]
+    rots = [local_joint_rotations(env)]  # (N, 15, 4) per frame: the start, then after each step
+    recorded = np.ones(episodes, dtype=np.int64)  # frames of `rots` each env keeps: until its first fall
     pairs, falls = [], 0
     for step in policy_steps(tr.agent, env, steps):
         res = step.result
@@ -106,16 +107,16 @@ def rollout_skill(tr: DeviceRun, skill: int, episodes: int, seconds: float, seed
         fell = res.terminated & alive
         falls += int(fell.sum())
         alive &= ~res.terminated
-        cur = local_joint_rotations(env)
-        for i in np.flatnonzero(alive):
-            rots[i].append(cur[i])
+        rots.append(local_joint_rotations(env))
+        recorded += alive
         if not alive.any():
             break
     d, logits = tr.discriminate_for(np.concatenate(pairs), skill)
 
     probs = F.softmax(logits, -1).cpu().numpy() if logits is not None else None
     r_style = style_reward(d).cpu().numpy()
-    return SkillRollout([np.array(r) for r in rots], probs, r_style, falls)
+    rots = np.stack(rots, axis=1)  # (N, T + 1, 15, 4); alive only shrinks, so each env keeps a prefix
+    return SkillRollout([r[:n] for r, n in zip(rots, recorded, strict=True)], probs, r_style, falls)
 
 
 @torch.no_grad()
