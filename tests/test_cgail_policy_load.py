@@ -89,21 +89,25 @@ def _recorded_run(tmp_path: Path, section: str = "", key: str = "", value=None) 
 def test_a_recorded_config_with_the_removed_keys_at_their_neutral_values_opens(tmp_path):
     """The removed knobs at the values that behave as the code that remains are dropped when the run is opened
     (its config.yaml is left as it was); env.curriculum_samples has no effect with the curriculum off, nor
-    env.ready_wait_steps / ready_after_pass with the ready radius 0, so any value of them is dropped."""
+    env.ready_wait_steps / ready_after_pass with the ready radius 0, nor the own starts' capacity, gate and floor with
+    their weight 0 or the return's gate without a return, so any value of them is dropped."""
     import yaml
     from omegaconf import OmegaConf
 
-    from charctl.experiments.cgail.config import READY_START_KEYS, REMOVED_KEYS, Config
+    from charctl.experiments.cgail.config import LATE_SWITCH_KEYS, READY_START_KEYS, REMOVED_KEYS, Config
     from charctl.runs import open_run
 
     run = _recorded_run(tmp_path, "env", "curriculum_samples", 500_000)
     written = yaml.safe_load((run / "config.yaml").read_text())
     # a run recorded between the ready start's addition and its removal lists its keys: off, or inert with it off
     written["env"].update(ready_radius=0.0, ready_wait_steps=6, ready_after_pass=False, ready_with_return=False)
+    # and a run recorded with the late-switch keys: weights 0, the inert ones at any value
+    written["env"].update(own_start_weight=0.0, own_start_capacity=512, own_start_by_success=True, own_start_floor=0.4)
+    written["env"].update(clip_return_seconds=0.0, clip_return_after_coverage=0.5, switch_prob_after_returns=0.0)
     (run / "config.yaml").write_text(yaml.safe_dump(written, sort_keys=False))
     before = (run / "config.yaml").read_text()
     recorded = yaml.safe_load(before)
-    for key in [*REMOVED_KEYS, *READY_START_KEYS]:  # the recorded config lists every removed key
+    for key in [*REMOVED_KEYS, *READY_START_KEYS, *LATE_SWITCH_KEYS]:  # the recorded config lists every removed key
         section, leaf = key.split(".")
         assert leaf in recorded[section]
         del recorded[section][leaf]
@@ -120,7 +124,8 @@ def test_a_recorded_config_with_the_removed_keys_at_their_neutral_values_opens(t
     assert (run / "config.yaml").read_text() == before
 
 
-FIRST, READY = ("2026-12-03", "8641215"), ("2026-12-07", "4c78237")  # the two removals: date, last commit with them
+FIRST, READY = ("2026-12-03", "8641215"), ("2026-12-07", "4c78237")  # the removals: date, last commit with them
+LATE = ("2026-12-07", "6c47e68")
 
 
 @pytest.mark.parametrize(
@@ -133,6 +138,9 @@ FIRST, READY = ("2026-12-03", "8641215"), ("2026-12-07", "4c78237")  # the two r
         ("env", "curriculum_start_seconds", 0.5, "env.curriculum_start_seconds=0.5", FIRST),
         ("env", "ready_radius", 0.3, "env.ready_radius=0.3", READY),
         ("env", "ready_with_return", True, "env.ready_with_return=true", READY),
+        ("env", "own_start_weight", 0.25, "env.own_start_weight=0.25", LATE),
+        ("env", "clip_return_seconds", 0.5, "env.clip_return_seconds=0.5", LATE),
+        ("env", "switch_prob_after_returns", 0.03, "env.switch_prob_after_returns=0.03", LATE),
     ],
 )
 def test_a_run_that_used_a_removed_option_is_refused_in_one_line(tmp_path, section, key, value, shown, removal):

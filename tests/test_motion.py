@@ -305,34 +305,6 @@ def test_canonicalize(facing, angle):
     np.testing.assert_allclose(can.body_pos[..., 1], clip.body_pos[..., 1], atol=1e-9)
 
 
-def _deg(axis: str, degrees: float) -> np.ndarray:
-    return Rotation.from_euler(axis, degrees, degrees=True).as_quat()  # xyzw, as the clips
-
-
-def test_with_return_blends_the_last_pose_back_to_the_first_by_hand():
-    """Frame 0: root at (0, 0.9, 0), turned 30 deg and tilted 20 deg about x, knee straight; last frame: root at
-    (1, 0.8, 2), turned 120 deg, knee at 60 deg. The blend's target is frame 0 turned by 120 - 30 = 90 deg (root
-    Ry(120) Rx(20)) over the last root's ground point at frame 0's height, (1, 0.9, 2). Three appended frames:
-    u = 1/4, 2/4, 3/4, w = 3u^2 - 2u^3 = 0.15625, 0.5, 0.84375."""
-    knee = BODY_NAMES.index("right_knee")
-    clip = _rest_clip(frames=2)
-    clip.root_pos[:] = [[0.0, 0.9, 0.0], [1.0, 0.8, 2.0]]
-    clip.local_rot[0, 0] = Rotation.from_euler("YX", [30, 20], degrees=True).as_quat()  # intrinsic: Ry(30) Rx(20)
-    clip.local_rot[1, 0] = _deg("y", 120)
-    clip.local_rot[1, knee] = _deg("z", 60)
-    out = clip.with_return(3)
-    w = np.array([0.15625, 0.5, 0.84375])
-    assert out.num_frames == 5 and not out.loop
-    np.testing.assert_array_equal(out.root_pos[:2], clip.root_pos)
-    np.testing.assert_allclose(out.root_pos[2:], np.stack([np.ones(3), 0.8 + 0.1 * w, 2 * np.ones(3)], 1), atol=1e-12)
-    knee_deg = Rotation.from_quat(out.local_rot[2:, knee]).as_euler("zyx", degrees=True)[:, 0]
-    np.testing.assert_allclose(knee_deg, 60 * (1 - w), atol=1e-9)
-    root = Rotation.from_quat(out.local_rot[3, 0]) * Rotation.from_euler("x", 10, degrees=True).inv()  # midway: Rx(10)
-    np.testing.assert_allclose(root.as_euler("yxz", degrees=True), [120, 0, 0], atol=1e-9)
-    assert R.angle_between(out.local_rot[2:, 1:knee], R.IDENTITY).max() < 1e-9  # straight joints stay straight
-    assert clip.with_return(0) is clip and clip.replace(loop=True).with_return(3).num_frames == 2
-
-
 def test_cross_matches_numpy_with_broadcasting():
     rng = np.random.default_rng(0)
     a, b = rng.standard_normal((5, 4, 3)), rng.standard_normal((4, 3))

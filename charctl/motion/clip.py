@@ -128,35 +128,6 @@ class Clip:
     def slice(self, start: int, stop: int) -> Clip:
         return self.replace(root_pos=self.root_pos[start:stop], local_rot=self.local_rot[start:stop], loop=False)
 
-    def with_return(self, frames: int) -> Clip:
-        """This clip with `frames` frames appended that blend its last pose back towards its first, so that a
-        timed reference that restarts at frame 0 after them moves on without a jump (in the heading frame).
-
-        The blend's target is frame 0 turned to the last frame's heading, its root over the last frame's
-        ground position at frame 0's height. Appended frame i (1..frames) is the last frame moved towards the
-        target by w = 3u^2 - 2u^3, u = i / (frames + 1) (root position linear, every rotation slerp), so the
-        restart's frame 0 is the step after the last one. A looping clip, or frames <= 0, comes back unchanged.
-        Used by cgail's `env.clip_return_seconds` for clips such as the right kick, whose guard at the end
-        stands 0.35 m (the left foot) from its guard at the start.
-        """
-        if frames <= 0 or self.loop:
-            return self
-        heading = self.heading()
-        last_pos, last_rot = self.root_pos[-1], self.local_rot[-1]
-        target_pos = np.array([last_pos[0], self.root_pos[0, 1], last_pos[2]])
-        target_rot = self.local_rot[0].copy()
-        target_rot[0] = R.multiply(R.heading_quat(np.array(heading[-1] - heading[0])), target_rot[0])
-        u = np.arange(1, frames + 1) / (frames + 1)
-        w = u * u * (3.0 - 2.0 * u)
-        pos = last_pos + w[:, None] * (target_pos - last_pos)
-        shape = (frames,) + last_rot.shape
-        rot = R.slerp(
-            np.broadcast_to(last_rot, shape), np.broadcast_to(target_rot, shape), np.broadcast_to(w[:, None], shape[:2])
-        )
-        return self.replace(
-            root_pos=np.concatenate([self.root_pos, pos]), local_rot=np.concatenate([self.local_rot, rot])
-        )
-
     def canonicalize(self, frame: int = 0, facing: str = "+x") -> Clip:
         """Move frame `frame`'s root to the origin on the ground plane and turn it to face `facing`.
 

@@ -9,14 +9,13 @@ never import the training modules (train.py, rollout.py, disc_update.py).
 from __future__ import annotations
 
 import functools
-from collections.abc import Collection
 from dataclasses import dataclass, field
 
 import torch
 
 from charctl.experiments.cgail.discriminator import Discriminator, ReplayBuffer
 from charctl.experiments.cgail.env import CgailEnv
-from charctl.experiments.cgail.skills import DemoPairs, load_skills, select_skills, switch_prob_for
+from charctl.experiments.cgail.skills import DemoPairs, load_skills, select_skills
 from charctl.rl.ppo import PPO, ActorCritic, make_adam
 
 
@@ -51,11 +50,6 @@ class Agent:
         return len(self.skills)
 
     @property
-    def returning(self) -> tuple[str, ...]:
-        """Names of the skills whose reference has env.clip_return_seconds' way back appended."""
-        return tuple(s.name for s in self.skills if len(s.obs) > s.clip_frames)
-
-    @property
     def training(self) -> bool:
         """True when the agent holds its training state (optimisers, demonstrations, replay buffer)."""
         return self.ppo is not None
@@ -82,9 +76,7 @@ def build_agent(cfg, device: str = "cpu", training: bool = True) -> Agent:
     from charctl.experiments.cgail.rules import state_dim as policy_state_width
 
     torch.manual_seed(cfg.seed)
-    env = cfg.env
-    returning = None if env.clip_return_after_coverage <= 0 else ()  # None: every non-looping clip from the start
-    skills = load_skills(select_skills(cfg), env.control_hz, env.shoulder_frame, env.clip_return_seconds, returning)
+    skills = load_skills(select_skills(cfg), cfg.env.control_hz, cfg.env.shoulder_frame)
     K = len(skills)
     conditional = bool(cfg.cgail.conditional)
     state_dim = policy_state_width(cfg.reward.kind == "tracking" or cfg.env.phase_obs)
@@ -107,24 +99,6 @@ def build_agent(cfg, device: str = "cpu", training: bool = True) -> Agent:
         demos.to_device(device)
         agent.device_generator = torch.Generator(device=device).manual_seed(int(cfg.seed) + 104729)
     return agent
-
-
-def set_returning(agent: Agent, names: Collection[str], env: CgailEnv | None = None) -> None:
-    """Give exactly the skills `names` the way back (env.clip_return_after_coverage switching one on, or a
-    checkpoint's `returning` on load): the agent's skills, its demonstration pairs (training; the discriminator's
-    normaliser stays as it was) and `env`'s reference tables and command switch rate (`skills.switch_prob_for`)
-    are rebuilt; running episodes go on. Only the skills whose return changes are loaded again."""
-    names, had, e = set(names), set(agent.returning), agent.cfg.env
-    changed = [c for c in select_skills(agent.cfg) if (c.name in names) != (c.name in had)]
-    fresh = {s.name: s for s in load_skills(changed, e.control_hz, e.shoulder_frame, e.clip_return_seconds, names)}
-    agent.skills = [fresh.get(s.name, s) for s in agent.skills]
-    if agent.demos is not None:
-        agent.demos = DemoPairs(agent.skills)
-        if torch.device(agent.device).type != "cpu":
-            agent.demos.to_device(agent.device)
-    if env is not None:
-        env.use_skills(agent.skills)
-        env.switch_prob = switch_prob_for(e, agent.skills, names)
 
 
 def _discriminator(cfg, pair_dim: int, num_skills: int) -> Discriminator:
@@ -161,7 +135,6 @@ def agent_state(agent: Agent, env: CgailEnv | None = None) -> dict:
         "gen_rng": agent.generator.get_state(),
         "skills": [s.name for s in agent.skills],
         "clips": [s.clip_name for s in agent.skills],
-        "returning": list(agent.returning),
     }
     if agent.device_generator is not None:  # demonstration pairs drawn on the device
         state["device_gen_rng"] = agent.device_generator.get_state().cpu()
@@ -191,7 +164,6 @@ def load_agent_state(agent: Agent, state: dict, env: CgailEnv | None = None) -> 
         agent.device_generator.set_state(state["device_gen_rng"].cpu())
     if env is not None:
         env.arrays.set_random_state(state)
-    _restore_returning(agent, state, env)
 
 
 def load_policy_state(agent: Agent, state: dict) -> None:
@@ -201,10 +173,3 @@ def load_policy_state(agent: Agent, state: dict) -> None:
     agent.disc.load_state_dict(state["disc"])
     agent.iteration, agent.samples = int(state["iteration"]), int(state["samples"])
     agent.unstable_total = int(state.get("unstable_total", 0))
-    _restore_returning(agent, state)
-
-
-def _restore_returning(agent: Agent, state: dict, env: CgailEnv | None = None) -> None:
-    """The skills with a way back as the checkpoint trained them (checkpoints before 2026-12-06: as the config)."""
-    if "returning" in state and set(state["returning"]) != set(agent.returning):
-        set_returning(agent, state["returning"], env)

@@ -79,55 +79,6 @@ class EnvConfig:
     start_failure_weight: float = ranged(0.0, ge=0, le=1)
     start_failure_lead: int = ranged(10, ge=0)  # control frames (0.33 s at 30 Hz)
     start_failure_halflife: float = ranged(300.0, gt=0)  # control steps after which the failure counts have halved
-    # Starts from the policy's own states (charctl.experiments.cgail.own_starts; docs/cgail.md "Starts from the
-    # policy's own states"): this share of a skill's training starts restores a physics state the policy itself
-    # reached where that skill's timed reference restarted at frame 0 (its next pass, or the end of a command ramp
-    # into it), with the reference at frame 0 and the restart's grace steps; the rest are RSI. Skills without a
-    # heading goal only (a heading goal's reference is the closest frame). 0 = RSI only (the paper). Every backend.
-    own_start_weight: float = ranged(0.0, ge=0, le=1)
-    own_start_capacity: int = ranged(4096, ge=1)  # restart states kept, the newest replacing the oldest
-    # true = each skill's share of own starts is own_start_weight x (1 - its recent failure rate, as fall_rate/<skill>):
-    # while a skill fails from the clip's own frames, its starts stay RSI. Until a kick completes a pass the ring holds
-    # only command-ramp ends (a walk pose, the kick at frame 0), and with the full share from the first sample the
-    # seed-1 kick came 2e7 samples late (docs/cgail.md, "Own starts and the moving walk reference from scratch").
-    # Added 2026-12-06: at seed 1 the kick back on time and every 3-skill target but the flight at 4e7; at seed 2 the
-    # kick failed its second pass at 0.88 to the end, so its share stayed at 0.03 and it kicked once and fell: the
-    # starts that teach the second pass are the own starts it withheld (docs/cgail.md, "Own starts gated by success,
-    # at 4e7 samples, seeds 1 and 2"). Not in the small preset.
-    own_start_by_success: bool = False
-    # with env.own_start_by_success: the success factor never falls below this, so a skill that keeps failing still
-    # gets own_start_weight x own_start_floor of its starts from its own states (the fix seed 2 asked for; added
-    # 2026-12-06, one run started at seed 2, same section). 0 = the gate as it was.
-    own_start_floor: float = ranged(0.0, ge=0, le=1)
-    # Seconds appended to every non-looping clip (the kicks, punches, jump, dances) that blend its last pose back to its
-    # first (charctl.motion.clip.Clip.with_return): the timed reference, RSI, the pose check, the tracking reward and
-    # the demonstrations run over clip + return, so a reference that restarts at frame 0 asks for the way back
-    # instead of jumping (the right kick ends in a guard 0.35 m, the left foot, from where it starts: the second
-    # pass that seed 2 of the gated own starts never learned). Evaluations compare with the clip alone. The return
-    # is a blend, not captured motion. 0 = the clips as they are (the paper). 2026-12-06, 0.5 s at seed 2: from the
-    # first sample the kick was not learned by 4e7; as a 5e6-sample continuation of a policy that kicked once, every
-    # pass kicked (switch 28 of 32). Not in the small preset. docs/cgail.md, "A way back".
-    clip_return_seconds: float = ranged(0.0, ge=0)
-    # With env.clip_return_seconds: a skill's return is switched on only once its training fidelity coverage
-    # (fidelity/<skill>/coverage, every train.fidelity_every samples) reaches this; until then its reference is the
-    # clip as it is. Against the return from the first sample, which at seed 2 never learned the first kick (the
-    # guard's 0.170 at 4e7), while the same policy that kicked once learned every pass within 5e6 samples once the
-    # return was added. The skills switched on are in the checkpoint (`Agent.returning`), so a resumed run and every
-    # evaluation use the reference it trained on (logged as returning/<skill>). 0 = from the first sample. Added
-    # 2026-12-06; 0.5 at seed 2 (make repro-cgail-3skill-return-gated): the kick's return on at 2.3e7, at 4e7 walk, run
-    # and every pass of the kick (no-fall 1.000), the switch only without the ramp; at seed 1 every pass of the kick,
-    # but its no-fall 0.781 and the switch 0 of 32 (it walks on). Not in the small preset (docs/cgail.md, "The way back
-    # once the first pass works").
-    clip_return_after_coverage: float = ranged(0.0, ge=0, le=1)
-    # With env.clip_return_after_coverage: the switch probability (as env.switch_prob) once every non-looping skill's
-    # return is on; until then env.switch_prob. 5e6 samples at env.switch_prob=0.03 after 4e7 taught the walk -> kick
-    # switch at both seeds; 0.03 from the first sample had the first kick late at seed 1 (foot 0.20-0.25 m at
-    # 1.1-1.5e7; a rerun without the extra switches was as late, so that is not pinned on them); this gives the
-    # switches once the kick's way back works, in one run. 0 = env.switch_prob throughout. Added
-    # 2026-12-06; 0.03 at seed 1 (make repro-cgail-3skill-return-gated-switch): every 3-skill target but the flight at
-    # 4e7, the walk -> kick switch 32 of 32 with the ramp; not in the small preset until seed 2 passes too
-    # (docs/cgail.md, "More switches once the way back is on").
-    switch_prob_after_returns: float = ranged(0.0, ge=0, le=1)
     action_scale: float = ranged(1.0, gt=0)  # PD target (rad) = rest pose + action_scale * action
     fall_tolerance: float = ranged(0.005, ge=0)  # m: a non-foot body this close to the ground ends the episode (a fall)
     goal_max_angle_deg: float = 45.0  # new heading goals lie within +- this angle of the current heading
@@ -283,6 +234,21 @@ READY_START_KEYS: dict[str, object] = {
     "env.ready_with_return": False,  # the wait only once a skill's way back was on
 }
 
+# Starts from the policy's own states, the way back appended to non-looping clips and the switches once it was on
+# (the late-switch command), removed on 2026-12-07 with their code and make targets (docs/cgail.md, from "Starts from
+# the policy's own states" to "Ten skills with the late-switch command": at three skills both seeds lost switches the
+# targets do not measure; at ten skills, 1.5e8 samples, the kicks were never learned); commit 6c47e68
+# still has them.
+LATE_SWITCH_KEYS: dict[str, object] = {
+    "env.own_start_weight": 0.0,  # share of a skill's starts restored from the policy's own restart states
+    "env.own_start_capacity": ANY_VALUE,  # restart states kept: no effect with the weight 0
+    "env.own_start_by_success": ANY_VALUE,  # that share scaled by the skill's success rate: no effect with weight 0
+    "env.own_start_floor": ANY_VALUE,  # the success factor's floor: no effect with the weight 0
+    "env.clip_return_seconds": 0.0,  # s blending a non-looping clip's last pose back to its first
+    "env.clip_return_after_coverage": ANY_VALUE,  # that return only once a skill's coverage reached it: none with 0 s
+    "env.switch_prob_after_returns": 0.0,  # the switch probability once every return was on; 0 = env.switch_prob
+}
+
 
 @dataclass
 class Config(BaseConfig):
@@ -290,6 +256,7 @@ class Config(BaseConfig):
     REMOVED = (
         RemovedKeys("2026-12-03", "8641215", REMOVED_KEYS),
         RemovedKeys("2026-12-07", "4c78237", READY_START_KEYS),
+        RemovedKeys("2026-12-07", "6c47e68", LATE_SWITCH_KEYS),
     )
 
     experiment: str = "cgail"
@@ -316,7 +283,6 @@ class Config(BaseConfig):
             keys += ["disc.style_head", "disc.wrong_skill_fakes"]
         if cfg.reward.kind == "tracking":
             keys += [
-                "env.own_start_weight",
                 "reward.low_style_threshold",
                 "reward.pose_error_threshold",
                 "reward.root_height_threshold",
@@ -383,9 +349,9 @@ def _check_rewards(cfg) -> str | None:
     if (msg := _check_track_skills(cfg)) is not None:
         return msg
     n_skills = len(cfg.use_skills) if cfg.use_skills else len(cfg.skills)
-    if r.kind == "tracking" and n_skills > 1 and max(cfg.env.switch_prob, cfg.env.switch_prob_after_returns) > 0:
+    if r.kind == "tracking" and n_skills > 1 and cfg.env.switch_prob > 0:
         return (
-            "reward.kind=tracking over several skills needs env.switch_prob=0 (and no env.switch_prob_after_returns): "
+            "reward.kind=tracking over several skills needs env.switch_prob=0: "
             "the reference phase belongs to the clip an episode started with (the multi-skill tracking baseline holds "
             "one command per episode)"
         )
@@ -420,8 +386,8 @@ def _check_disc(cfg) -> str | None:
 
 
 def _check_env(cfg) -> str | None:
-    """Physics and control rates, fall-weighted commands, failure-weighted start frames and starts from the policy's
-    own states (the ranges are declared on the fields)."""
+    """Physics and control rates, fall-weighted commands and failure-weighted start frames (the ranges are declared
+    on the fields)."""
     env = cfg.env
     ratio = env.physics_hz / env.control_hz
     if abs(ratio - round(ratio)) > 1e-6:
@@ -435,27 +401,6 @@ def _check_env(cfg) -> str | None:
             "env.start_failure_weight needs a timed reference to place failures in the clip: env.phase_obs=true, "
             "reward.pose_error_threshold > 0 or reward.kind=tracking"
         )
-    if env.own_start_by_success and env.own_start_weight <= 0:
-        return "env.own_start_by_success scales env.own_start_weight: set env.own_start_weight > 0 with it"
-    if env.own_start_floor > 0 and not env.own_start_by_success:
-        return "env.own_start_floor bounds env.own_start_by_success's factor: set env.own_start_by_success=true with it"
-    if env.clip_return_after_coverage > 0 and (env.clip_return_seconds <= 0 or cfg.train.fidelity_every <= 0):
-        return (
-            "env.clip_return_after_coverage gates env.clip_return_seconds by the training fidelity: set "
-            "env.clip_return_seconds > 0 and train.fidelity_every > 0 with it"
-        )
-    if env.switch_prob_after_returns > 0 and env.clip_return_after_coverage <= 0:
-        return (
-            "env.switch_prob_after_returns applies once env.clip_return_after_coverage has switched every return on: "
-            "set env.clip_return_after_coverage > 0 with it"
-        )
-    if env.own_start_weight > 0:
-        r = cfg.reward
-        if r.kind != "adversarial" or not (env.phase_obs or r.pose_error_threshold > 0) or r.pose_error_grace_steps < 1:
-            return (
-                "env.own_start_weight > 0 needs a reference that restarts at frame 0: reward.kind=adversarial with "
-                "env.phase_obs=true or reward.pose_error_threshold > 0, and reward.pose_error_grace_steps >= 1"
-            )
     return None
 
 

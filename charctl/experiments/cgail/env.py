@@ -36,7 +36,6 @@ from charctl.experiments.cgail.env_arrays import arrays_for, simulator
 from charctl.experiments.cgail.env_rows import IndexRows, MaskRows
 from charctl.experiments.cgail.env_rules import env_reference_check
 from charctl.experiments.cgail.features import DISC_OBS_DIM, Kinematics, disc_obs, heading_frame, policy_state
-from charctl.experiments.cgail.own_starts import OwnStarts, restarted_here
 from charctl.experiments.cgail.rules import (
     advance_ramp,
     advance_reference,
@@ -61,9 +60,9 @@ from charctl.experiments.cgail.skills import SkillData
 from charctl.experiments.cgail.step_result import StepResult
 from charctl.motion.array_compat import namespace, rotations_for
 
-# Evaluation envs start from the clips: the weighted and the own-state starts are training rules (env config keys
-# set to these values by `policy.TrainedRun.make_env` without rules and by the fidelity evaluation's env).
-EVALUATION_STARTS = {"start_failure_weight": 0.0, "own_start_weight": 0.0}
+# Evaluation envs start from the clips: the weighted starts are a training rule (env config keys set to these values
+# by `policy.TrainedRun.make_env` without rules and by the fidelity evaluation's env).
+EVALUATION_STARTS = {"start_failure_weight": 0.0}
 
 
 class CgailEnv:
@@ -89,9 +88,7 @@ class CgailEnv:
         for MuJoCo Warp (`device`) for torch. The rule keywords come from `env_rules.env_rules`."""
         self.skills = skills
         self.cfg = env_cfg = plain_section(env_cfg)  # typed fields, cheap reads in the step loop
-        # per control step, the probability of a command switch: env.switch_prob (training raises it to
-        # env.switch_prob_after_returns once every way back is on, `skills.switch_prob_for`)
-        self.switch_prob = float(env_cfg.switch_prob)
+        self.switch_prob = float(env_cfg.switch_prob)  # per control step, the probability of a command switch
         self.tracking = tracking  # phase in the state, reference frame advanced every step
         # training only (reward.pose_error_threshold): end episodes that leave the clip's timed reference
         self.pose_threshold, self.pose_grace = float(pose_error_threshold), int(pose_error_grace_steps)
@@ -114,19 +111,6 @@ class CgailEnv:
         self.state_dim = state_dim(tracking or self.phase_obs)
         self.obs_dim = self.state_dim
         self._init_env_state()
-        self.own_starts = (  # env.own_start_weight: restart states of the policy's own
-            OwnStarts(
-                int(env_cfg.own_start_capacity),
-                self.rsi_qpos.shape[-1],
-                self.rsi_qvel.shape[-1],
-                self.K,
-                a.zeros,
-                self.rsi_qpos.dtype,
-                a.index_dtype,
-            )
-            if env_cfg.own_start_weight > 0
-            else None
-        )
         self.reset(a.array([True] * self.N, a.bool_dtype))
 
     # the row form of the array library (its random state, for checkpoints, is `self.arrays.random_state()`)
@@ -161,21 +145,6 @@ class CgailEnv:
         clips = np.array([len(s.obs) for s in skills]), np.array([s.loop for s in skills])
         lead = start_frames.lead_window_index(*clips, self.cfg.start_failure_lead)
         self._lead = tuple(a.array(x, i64) for x in lead)  # each start frame's lead window
-
-    def use_skills(self, skills: list[SkillData]) -> None:
-        """Swap in `skills` (the same skills in the same order, other reference lengths: env.clip_return_after_coverage
-        switching a way back on, or a checkpoint's on load): the per-skill tables are rebuilt, the failure counts per
-        reference frame (env.start_failure_weight) kept where the frame still exists, and every running episode goes
-        on from its reference frame (clamped to its clip's new last frame)."""
-        old = self.frame_failures
-        self.skills = skills
-        self._load_skill_tables(skills)
-        a = self.arrays
-        self.frame_failures = a.zeros((self.K, max(len(s.obs) for s in skills)), old.dtype)
-        keep = min(old.shape[1], self.frame_failures.shape[1])
-        self.frame_failures[:, :keep] = old[:, :keep]
-        xp = namespace(self.ref_frame)
-        self.ref_frame = xp.minimum(self.ref_frame, self.clip_frames[self.cmd] - 1)
 
     def _init_env_state(self) -> None:
         """The per-env state before the first reset: commands, ramp weights, step counts, heading goals,
@@ -258,15 +227,6 @@ class CgailEnv:
         qpos = self.rsi_qpos[skill, frames]  # advanced indexing: copies
         qvel = self.rsi_qvel[skill, frames]
         R = rotations_for(qpos)
-        xp = namespace(qpos)
-        grace = 0
-        if self.own_starts is not None and self.start_frame is None:  # a forced frame (evaluation) starts there
-            u_own, u_slot = self.arrays.uniform(rows), self.arrays.uniform(rows)
-            own, slots = self.own_starts.draw(skill, u_own, u_slot, xp.take(self.own_start_shares(), skill))
-            qpos = xp.where(own[:, None], self.own_starts.qpos[slots], qpos)
-            qvel = xp.where(own[:, None], self.own_starts.qvel[slots], qvel)
-            frames = xp.where(own, xp.zeros_like(frames), frames)
-            grace = xp.where(own, xp.full_like(frames, self.pose_grace), xp.zeros_like(frames))  # as a restart has
         turn = R.heading_quat(yaw)
         qpos[:, 0] = 0.0
         qpos[:, 2] = 0.0
@@ -280,7 +240,7 @@ class CgailEnv:
         self.steps = rows.put(self.steps, 0)
         self.ref_frame = rows.put(self.ref_frame, frames)
         self.ref_active = rows.put(self.ref_active, True)
-        self.ref_grace = rows.put(self.ref_grace, grace)
+        self.ref_grace = rows.put(self.ref_grace, 0)
         self.yaw_err = rows.put(self.yaw_err, 0.0)
         k = self.arrays.kinematics(None if isinstance(rows, MaskRows) else rows)
         self.goal_angle = rows.put(self.goal_angle, R.yaw_about_y(k.body_rot[:, 0]) + goal_offset)
@@ -406,8 +366,6 @@ class CgailEnv:
         self._advance_ramp()
         if self.timed_reference:
             self._restart_reference_after_ramp()
-        if self.own_starts is not None:
-            self._keep_own_starts(done)
         self.reset(done)
         self._maybe_switch(~done)  # the envs that did not just reset
         return StepResult(
@@ -423,20 +381,6 @@ class CgailEnv:
             pose_ended,
             scored,
         )
-
-    def own_start_shares(self):
-        """(K,) each skill's probability of a start from the ring where it holds a state of that skill:
-        env.own_start_weight, times the skill's recent success rate (1 - its failure rate, `fall_rate/<skill>`, at
-        least env.own_start_floor) with env.own_start_by_success (logged as own_start_share/<skill>)."""
-        if not self.cfg.own_start_by_success:
-            return self.cfg.own_start_weight * namespace(self.fall_rate).ones_like(self.fall_rate)
-        return self.cfg.own_start_weight * (1.0 - self.fall_rate).clip(min=self.cfg.own_start_floor)
-
-    def _keep_own_starts(self, done) -> None:
-        """env.own_start_weight: keep the physics states of the envs whose timed reference restarted at frame 0 this
-        step (`own_starts.restarted_here`), except those that ended and skills with a heading goal."""
-        fresh = restarted_here(self.ref_grace, self.ref_active, self.pose_grace) & ~done & ~self.has_goal[self.cmd]
-        self.own_starts.keep(self.sim.qpos, self.sim.qvel, self.cmd, fresh)
 
     def _maybe_switch(self, mask) -> None:
         """Switch each env in `mask` to a random command with probability `self.switch_prob`."""

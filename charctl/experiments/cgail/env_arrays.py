@@ -32,7 +32,6 @@ class HostArrays:
     on_device = False
     compact_rows = True  # a subset is always its ids
     bool_dtype = np.bool_
-    index_dtype = np.int64
     float_dtype = np.float64  # the per-env bookkeeping (ramp weights, goals, heading errors)
     net_dtype = np.float64  # the policy state and disc obs (the rollout casts them for the networks)
 
@@ -86,10 +85,6 @@ class HostArrays:
         """(n,) uniform in [-half_width, half_width)."""
         return self.rng.uniform(-half_width, half_width, size=len(rows.ids))
 
-    def uniform(self, rows: IndexRows) -> np.ndarray:
-        """(n,) uniform in [0, 1)."""
-        return self.rng.random(len(rows.ids))
-
     def switches(self, env, mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """((N,) bool the envs in `mask` that switch this step, (N,) their new commands)."""
         ids = np.flatnonzero(mask)
@@ -140,7 +135,6 @@ class TorchArrays:
 
     on_device = True
     bool_dtype = torch.bool
-    index_dtype = torch.int64
     float_dtype = torch.float32
     net_dtype = torch.float32
 
@@ -197,10 +191,6 @@ class TorchArrays:
 
     def symmetric(self, rows: IndexRows | MaskRows, half_width: float) -> torch.Tensor:
         return rows.pick(self._symmetric_all(half_width))
-
-    def uniform(self, rows: IndexRows | MaskRows) -> torch.Tensor:
-        """The subset's rows of N uniforms in [0, 1)."""
-        return rows.pick(self._rand(self.sim.num_envs))
 
     def _symmetric_all(self, half_width: float) -> torch.Tensor:
         """(N,) uniform in [-half_width, half_width), as (2u - 1) * half_width."""

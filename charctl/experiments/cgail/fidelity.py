@@ -80,12 +80,10 @@ class ClipReference:
 
 def clip_reference(skill) -> ClipReference:
     """The `ClipReference` of a `skills.SkillData`: forward kinematics of its local rotations from its
-    root positions (exactly the simulator's body positions at those states); the clip's own frames only
-    (`SkillData.clip_only`: without env.clip_return_seconds' return)."""
+    root positions (exactly the simulator's body positions at those states)."""
     from charctl.motion.fk import forward_kinematics
     from charctl.motion.skeleton import load_skeleton
 
-    skill = skill.clip_only()
     pos, rot = forward_kinematics(load_skeleton(), skill.qpos[:, :3], skill.local_rot)
     return ClipReference(
         skill.name,

@@ -33,9 +33,8 @@ PAPER_TABLE_6_1 = {
 
 
 def skill_reference(tr: TrainedRun, skill: int, frames: int) -> np.ndarray:
-    """(m, 15, 4) reference local rotations covering `frames` frames (looping clips tiled; the clip's own frames,
-    without env.clip_return_seconds' return)."""
-    ref = tr.agent.skills[skill].clip_only()
+    """(m, 15, 4) reference local rotations covering `frames` frames (looping clips tiled)."""
+    ref = tr.agent.skills[skill]
     rot = ref.local_rot
     if ref.loop and frames > len(rot):
         reps = int(np.ceil(frames / (len(rot) - 1)))
@@ -64,7 +63,7 @@ def dtw_table(runs: list[DeviceRun], episodes: int) -> dict[str, dict[str, float
             if s not in tr.skill_names:
                 continue
             k = tr.skill_index(s)
-            seconds = max(2.0, min(5.0, 2 * tr.agent.skills[k].clip_frames / tr.cfg.env.control_hz))
+            seconds = max(2.0, min(5.0, 2 * len(tr.agent.skills[k].local_rot) / tr.cfg.env.control_hz))
             ro = rollout_skill(tr, k, episodes, seconds, seed=1234)
             errs = [dtw_pose_error(r, skill_reference(tr, k, len(r))) for r in ro.local_rot if len(r) > 2]
             table[s][tr.label] = float(np.mean(errs)) if errs else float("nan")
@@ -97,7 +96,7 @@ def confusion_matrices(tr: DeviceRun, episodes: int, seed: int) -> tuple[np.ndar
         policy[k] = ro.probs.mean(0)
     data = np.zeros((K, K))
     with torch.no_grad():
-        for k, p in enumerate(DemoPairs([s.clip_only() for s in tr.agent.skills]).pairs):  # each clip's own pairs
+        for k, p in enumerate(DemoPairs(tr.agent.skills).pairs):  # the demonstration pairs of each clip
             _, logits = tr.discriminate_for(p, k)
             data[k] = F.softmax(logits, -1).mean(0).cpu().numpy()
     return policy, data

@@ -19,14 +19,13 @@ import time
 import numpy as np
 import torch
 
-from charctl.experiments.cgail.agent import Agent, agent_state, build_agent, load_agent_state, set_returning
+from charctl.experiments.cgail.agent import Agent, agent_state, build_agent, load_agent_state
 from charctl.experiments.cgail.config import method_label
 from charctl.experiments.cgail.disc_update import class_accuracy_on_policy, update_discriminator
 from charctl.experiments.cgail.env import CgailEnv
 from charctl.experiments.cgail.env_rules import env_rules
 from charctl.experiments.cgail.reward import discriminator_rewards, total_reward
 from charctl.experiments.cgail.rollout import Rollout, collect_rollout
-from charctl.experiments.cgail.skills import returning_after
 from charctl.experiments.cgail.termination import LowStyleTermination
 from charctl.rl.runner import AgentCounters, crossed_multiple
 
@@ -108,25 +107,7 @@ class CgailLearner(AgentCounters):
             from charctl.experiments.cgail.fidelity import training_fidelity
 
             stats.update(training_fidelity(self.agent, seed=self.agent.iteration))
-            if self.cfg.env.clip_return_after_coverage > 0:
-                stats.update(self._switch_on_returns(stats))
         return stats
-
-    def _switch_on_returns(self, stats: dict[str, float]) -> dict[str, float]:
-        """env.clip_return_after_coverage: after a training fidelity check, give the way back to each non-looping
-        skill whose coverage reached the gate (`skills.returning_after`); returns returning/<skill> (1 = on)."""
-        agent = self.agent
-        coverage = {s.name: stats.get(f"fidelity/{s.name}/coverage", 0.0) for s in agent.skills}
-        names = returning_after(coverage, agent.skills, self.cfg.env.clip_return_after_coverage, agent.returning)
-        if set(names) != set(agent.returning):
-            new = ", ".join(sorted(set(names) - set(agent.returning)))
-            samples = agent.samples + self.samples_per_iteration  # this iteration's, as the fidelity scalars'
-            print(f"note: {samples:,} samples: the way back (env.clip_return_seconds) is on for {new}")
-            set_returning(agent, names, self.env)
-            if self.acting is not None:  # train.overlap_update's acting copy holds the same skills
-                self.acting.skills, self.acting.demos = agent.skills, agent.demos
-        out = {f"returning/{s.name}": float(s.name in names) for s in agent.skills if not s.loop}
-        return out | {"returning/switch_prob": self.env.switch_prob}
 
     def _iterate_in_turn(self) -> dict[str, float]:
         """Rollout, rewards, PPO and discriminator updates, one after another."""
@@ -247,10 +228,6 @@ class CgailLearner(AgentCounters):
             "train/unstable_rate": float(ro.unstable) / n,
             "sim/unstable_resets": float(ro.unstable),
         }
-        if env.own_starts is not None:  # env.own_start_weight: restart states kept so far, each skill's share
-            stats["train/own_start_states"] = float(env.own_starts.written)
-            shares = env.own_start_shares().tolist()
-            stats.update({f"own_start_share/{sk.name}": float(w) for sk, w in zip(agent.skills, shares)})
         if agent.conditional:  # both envs keep per-skill failure rates (env.skill_fall_weight)
             stats.update({f"fall_rate/{sk.name}": float(r) for sk, r in zip(agent.skills, env.fall_rate.tolist())})
             stats["train/r_class"] = float(rew["r_class"].mean())
