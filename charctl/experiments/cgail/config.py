@@ -235,10 +235,9 @@ READY_START_KEYS: dict[str, object] = {
 }
 
 # Starts from the policy's own states, the way back appended to non-looping clips and the switches once it was on
-# (the late-switch command), removed on 2026-12-07 with their code and make targets (docs/cgail.md, from "Starts from
-# the policy's own states" to "Ten skills with the late-switch command": at three skills both seeds lost switches the
-# targets do not measure; at ten skills, 1.5e8 samples, the kicks were never learned); commit 6c47e68
-# still has them.
+# (the late-switch command), removed on 2026-12-07 with their code and make targets (docs/cgail.md, "The late-switch
+# lineage removed": at three skills both seeds lost switches the targets do not measure; at ten skills, 1.5e8
+# samples, the kicks were never learned); commit 6c47e68 still has them.
 LATE_SWITCH_KEYS: dict[str, object] = {
     "env.own_start_weight": 0.0,  # share of a skill's starts restored from the policy's own restart states
     "env.own_start_capacity": ANY_VALUE,  # restart states kept: no effect with the weight 0
