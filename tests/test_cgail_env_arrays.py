@@ -15,9 +15,7 @@ from charctl.experiments.cgail.env_arrays import HostArrays, TorchArrays
 
 def _fake_env(xp_array, K=3, N=6):
     cfg = SimpleNamespace(start_failure_weight=0.0, goal_max_angle_deg=30.0, skill_fall_weight=0.0, switch_prob=0.5)
-    env = SimpleNamespace(
-        N=N, K=K, cfg=cfg, switch_prob=cfg.switch_prob, forced_command=None, start_frame=None, random_yaw=True
-    )
+    env = SimpleNamespace(N=N, K=K, cfg=cfg, forced_command=None, start_frame=None, random_yaw=True)
     env.rsi_frames = xp_array([10, 20, 5])
     return env
 

@@ -88,7 +88,6 @@ class CgailEnv:
         for MuJoCo Warp (`device`) for torch. The rule keywords come from `env_rules.env_rules`."""
         self.skills = skills
         self.cfg = env_cfg = plain_section(env_cfg)  # typed fields, cheap reads in the step loop
-        self.switch_prob = float(env_cfg.switch_prob)  # per control step, the probability of a command switch
         self.tracking = tracking  # phase in the state, reference frame advanced every step
         # training only (reward.pose_error_threshold): end episodes that leave the clip's timed reference
         self.pose_threshold, self.pose_grace = float(pose_error_threshold), int(pose_error_grace_steps)
@@ -383,8 +382,8 @@ class CgailEnv:
         )
 
     def _maybe_switch(self, mask) -> None:
-        """Switch each env in `mask` to a random command with probability `self.switch_prob`."""
-        if self.K < 2 or self.switch_prob <= 0 or self.forced_command is not None:
+        """Switch each env in `mask` to a random command with probability env.switch_prob."""
+        if self.K < 2 or self.cfg.switch_prob <= 0 or self.forced_command is not None:
             return
         switch, new = self.arrays.switches(self, mask)
         if not self.on_device and not switch.any():

@@ -88,7 +88,7 @@ class HostArrays:
     def switches(self, env, mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """((N,) bool the envs in `mask` that switch this step, (N,) their new commands)."""
         ids = np.flatnonzero(mask)
-        ids = ids[self.rng.random(ids.size) < env.switch_prob]
+        ids = ids[self.rng.random(ids.size) < env.cfg.switch_prob]
         switch = np.zeros(env.N, dtype=bool)
         new = env.cmd.copy()
         if ids.size:
@@ -197,7 +197,7 @@ class TorchArrays:
         return (2.0 * self._rand(self.sim.num_envs) - 1.0) * half_width
 
     def switches(self, env, mask: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        switch = mask & (self._rand(env.N) < env.switch_prob)
+        switch = mask & (self._rand(env.N) < env.cfg.switch_prob)
         return switch, env._sample_skills(env.N)
 
     def reset_draws(self, env, rows: IndexRows | MaskRows):
