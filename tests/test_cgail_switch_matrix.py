@@ -83,7 +83,7 @@ def test_the_batched_rollout_of_all_pairs_is_each_pair_rolled_out_alone():
     assert batched.pos_after.shape == (120, 8, 15, 3) and batched.probs.shape == (150, 8, 3)
     for p, (a, b) in enumerate(pairs):
         alone = switch_rollout(tr, a, b, 2, *frames.values())
-        pair = batched.trials(slice(2 * p, 2 * p + 2))
+        pair = batched.pair(p, 2)
         np.testing.assert_allclose(pair.pos_after, alone.pos_after, atol=1e-4)
         np.testing.assert_allclose(pair.probs, alone.probs, atol=1e-4)
         np.testing.assert_array_equal(pair.alive_hist, alone.alive_hist)

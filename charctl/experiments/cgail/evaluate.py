@@ -122,8 +122,9 @@ def eval_switch_matrix(tr: DeviceRun, trials: int, out: Path, before_s: float = 
         rec = _switch_recording(tr, pairs[:, 0], pairs[:, 1], trials, ramp, frames, progress=bar)
     cells = {}
     for p, (ka, kb) in enumerate(pairs):
-        pair = rec.trials(slice(p * trials, (p + 1) * trials))
-        cells[(names[ka], names[kb])] = switch_summary(tr, kb, pair, t_switch, ramp, trials, coverage_from=ramp)
+        cells[(names[ka], names[kb])] = switch_summary(
+            tr, kb, rec.pair(p, trials), t_switch, ramp, trials, coverage_from=ramp
+        )
     return write_switch_matrix(out, tr, cells, frames)
 
 

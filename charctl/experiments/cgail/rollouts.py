@@ -155,8 +155,10 @@ class SwitchRecording:
     pos_after: np.ndarray  # (F, N, 15, 3) world bodies of the F frames after the switch (PERFORM window)
     rot_after: np.ndarray  # (F, N, 15, 4)
 
-    def trials(self, envs: slice) -> SwitchRecording:
-        """The recording of the envs `envs` only (one pair's trials of a batched `switch_rollout`)."""
+    def pair(self, p: int, trials: int) -> SwitchRecording:
+        """Pair `p`'s `trials` envs only, of a batched `switch_rollout` (pair-major: envs p * trials to
+        (p + 1) * trials - 1)."""
+        envs = slice(p * trials, (p + 1) * trials)
         return SwitchRecording(
             self.probs[:, envs],
             self.r_style[:, envs],
@@ -199,7 +201,7 @@ def switch_rollout(
     """`trials` envs per pair commanded with skill `ka`, switched to `kb` at frame `t_switch` (over `ramp` frames,
     0: at once), recorded until frame `t_end`; bodies kept for the `perform_frames` after the switch. `ka`, `kb`:
     one pair of skill indices, or P pairs as (P,) arrays, all rolled out at once in P x `trials` envs, pair-major
-    (pair p's trials are envs p * trials to (p + 1) * trials - 1: `SwitchRecording.trials`). `progress`, when
+    (`SwitchRecording.pair` cuts out one pair's trials). `progress`, when
     given, advances by one per control step."""
     hz = tr.cfg.env.control_hz
     episode_seconds = t_end / hz + 1.0
