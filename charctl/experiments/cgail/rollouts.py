@@ -201,8 +201,7 @@ def switch_rollout(
     """`trials` envs per pair commanded with skill `ka`, switched to `kb` at frame `t_switch` (over `ramp` frames,
     0: at once), recorded until frame `t_end`; bodies kept for the `perform_frames` after the switch. `ka`, `kb`:
     one pair of skill indices, or P pairs as (P,) arrays, all rolled out at once in P x `trials` envs, pair-major
-    (`SwitchRecording.pair` cuts out one pair's trials). `progress`, when
-    given, advances by one per control step."""
+    (`SwitchRecording.pair` cuts out one pair's trials). `progress`, when given, advances by one per control step."""
     hz = tr.cfg.env.control_hz
     episode_seconds = t_end / hz + 1.0
     ka, kb = (np.repeat(np.atleast_1d(np.asarray(k, dtype=np.int64)), trials) for k in (ka, kb))
