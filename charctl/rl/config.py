@@ -42,6 +42,12 @@ class PPOConfig:
     desired_kl: float = 0.0
     lr_min: float = 1e-6  # lower bound of the adaptive learning rate
     lr_max: float = 1e-3  # upper bound of the adaptive learning rate
+    # Weight of the symmetry (mirror) loss (charctl.rl.symmetry; Yu et al. 2018, rsl_rl's mirror_loss_coeff):
+    # the mean squared difference (action units^2) between the action mean on mirrored states and the mirror of
+    # the action mean, added to each minibatch's loss, on the samples whose experiment defines a mirror (cgail:
+    # commands whose clips are each other's mirror, e.g. right_kick = kick and left_kick = kick:mirror), so
+    # what one side of a pair learns the other gets. 0: off; only experiments that build a mirror accept > 0.
+    mirror_loss: float = ranged(0.0, ge=0)
 
 
 def check_ppo(ppo) -> str | None:

@@ -17,6 +17,7 @@ from torch import nn
 from charctl.nn.mlp import RunningNorm, mlp
 from charctl.rl.config import PPOConfig
 from charctl.rl.storage import RolloutStorage
+from charctl.rl.symmetry import Mirror, mirror_loss
 
 
 class ActorCritic(nn.Module):
@@ -63,6 +64,14 @@ class ActorCritic(nn.Module):
         with torch.autocast(x.device.type, dtype=low_precision):
             h_actor, h_critic = self.actor[:-1](x), self.critic[:-1](x)
         return self.actor[-1](h_actor.float()), self.critic[-1](h_critic.float()).squeeze(-1)
+
+    def action_mean(self, x: torch.Tensor, low_precision: torch.dtype | None = None) -> torch.Tensor:
+        """The action mean of network inputs `x` alone (`heads` without the critic), in the same precision."""
+        if low_precision is None:
+            return self.actor(x)
+        with torch.autocast(x.device.type, dtype=low_precision):
+            h = self.actor[:-1](x)
+        return self.actor[-1](h.float())
 
 
 _LOG_SQRT_2PI = 0.5 * math.log(2.0 * math.pi)
@@ -180,11 +189,22 @@ def resolve_update_precision(choice: str, device: torch.device) -> str:
 class PPO:
     """Owns the actor-critic and its optimiser; `update(storage)` runs the minibatch epochs."""
 
-    def __init__(self, model: ActorCritic, cfg: PPOConfig, generator: torch.Generator | None = None):
+    def __init__(
+        self,
+        model: ActorCritic,
+        cfg: PPOConfig,
+        generator: torch.Generator | None = None,
+        mirror: Mirror | None = None,
+    ):
+        """`mirror`: the experiment's left/right mirror (`charctl.rl.symmetry`), used when cfg.mirror_loss > 0."""
         self.model, self.cfg = model, cfg
         self.optimizer = make_adam([p for p in model.parameters() if p.requires_grad], lr=cfg.lr)
         self.generator = generator
-        self.precision = resolve_update_precision(cfg.update_precision, next(model.parameters()).device)
+        device = next(model.parameters()).device
+        self.precision = resolve_update_precision(cfg.update_precision, device)
+        if cfg.mirror_loss > 0 and mirror is None:
+            raise ValueError("ppo.mirror_loss > 0 needs the experiment's mirror (charctl.rl.symmetry.Mirror)")
+        self.mirror = mirror.to(device) if mirror is not None and cfg.mirror_loss > 0 else None
 
     def update(self, storage: RolloutStorage, stale_behaviour: bool = False) -> dict[str, float]:
         """The minibatch epochs on `storage`. `stale_behaviour`: the data was collected by an older policy
@@ -202,11 +222,12 @@ class PPO:
         low = {"fp32": None, "bf16": torch.bfloat16}[self.precision]
         start_policy = self._start_policy(data, inputs, low, stale_behaviour)
         weights = start_policy[3]
+        mirrored = self._mirrored_inputs(data)
         for _ in range(cfg.epochs):
             perm = torch.randperm(n, generator=self.generator).to(data["obs"].device)
             for start in range(0, n - mb + 1, mb):
                 idx = perm[start : start + mb]
-                for k, v in self._minibatch_step(data, inputs, idx, low, *start_policy).items():
+                for k, v in self._minibatch_step(data, inputs, idx, low, *start_policy, mirrored).items():
                     sums[k] = sums.get(k, 0.0) + v.detach().double()
                 steps += 1
         stats = {f"losses/{k}": float(v) / max(steps, 1) for k, v in sums.items()}
@@ -214,6 +235,14 @@ class PPO:
         if weights is not None:
             stats["losses/behaviour_weight"] = float(weights.mean())
         return stats
+
+    def _mirrored_inputs(self, data: dict) -> tuple[torch.Tensor, torch.Tensor] | None:
+        """(network inputs of the mirrored states and commands (n, in_dim), (n,) bool the mirror applies), or
+        None without a mirror loss; normalised once, like the inputs (the normaliser is frozen here)."""
+        if self.mirror is None:
+            return None
+        m = self.mirror
+        return self.model.network_input(m.obs(data["obs"]), m.cond(data["cond"])), m.applies(data["cond"])
 
     def _start_policy(self, data: dict, inputs: torch.Tensor, low: torch.dtype | None, stale_behaviour: bool) -> tuple:
         """The policy at the update's start, in the update's precision `low` (None: fp32), where it is needed:
@@ -244,9 +273,11 @@ class PPO:
         old_log_std: torch.Tensor | None,
         old_logp: torch.Tensor,
         weights: torch.Tensor | None,
+        mirrored: tuple[torch.Tensor, torch.Tensor] | None = None,
     ) -> dict[str, torch.Tensor]:
         """One gradient step on the minibatch `idx` (KL-adapting the learning rate first when
-        `desired_kl` > 0); returns its losses and the policy entropy."""
+        `desired_kl` > 0); returns its losses and the policy entropy. `mirrored`: `_mirrored_inputs`, for the
+        mirror loss (weighted by cfg.mirror_loss) on the minibatch's samples where the mirror applies."""
         cfg = self.cfg
         x = inputs[idx]
         adv = data["advantages"][idx]
@@ -269,6 +300,11 @@ class PPO:
         )
         entropy = gaussian_entropy(self.model.log_std)
         loss = losses["policy"] + cfg.value_coef * losses["value"] - cfg.entropy_coef * entropy
+        if mirrored is not None:
+            sel = mirrored[1][idx]
+            mirrored_mean = self.model.action_mean(mirrored[0][idx][sel], low)
+            losses["mirror"] = mirror_loss(mirrored_mean, mean[sel], self.mirror)
+            loss = loss + cfg.mirror_loss * losses["mirror"]
         self.optimizer.zero_grad(set_to_none=True)
         loss.backward()
         nn.utils.clip_grad_norm_(self.model.parameters(), cfg.max_grad_norm)

@@ -85,7 +85,7 @@ def build_agent(cfg, device: str = "cpu", training: bool = True) -> Agent:
         disc = _discriminator(cfg, 2 * DISC_OBS_DIM, K).to(device)  # its normaliser comes from the checkpoint
         return Agent(cfg, skills, model, disc, device=str(device))
     gen = torch.Generator().manual_seed(cfg.seed)
-    ppo = PPO(model, cfg.ppo, generator=gen)
+    ppo = PPO(model, cfg.ppo, generator=gen, mirror=_mirror(cfg, skills))
     disc = _discriminator(cfg, 2 * DISC_OBS_DIM, K)
     demos = DemoPairs(skills)
     pairs, _ = demos.all()
@@ -99,6 +99,16 @@ def build_agent(cfg, device: str = "cpu", training: bool = True) -> Agent:
         demos.to_device(device)
         agent.device_generator = torch.Generator(device=device).manual_seed(int(cfg.seed) + 104729)
     return agent
+
+
+def _mirror(cfg, skills: list):
+    """The policy's left/right mirror for ppo.mirror_loss (`symmetry.build_mirror`), or None when it is off."""
+    if cfg.ppo.mirror_loss <= 0:
+        return None
+    from charctl.experiments.cgail.symmetry import build_mirror
+
+    phase = cfg.reward.kind == "tracking" or cfg.env.phase_obs
+    return build_mirror([s.clip_name for s in skills], bool(cfg.cgail.conditional), cfg.env.shoulder_frame, phase)
 
 
 def _discriminator(cfg, pair_dim: int, num_skills: int) -> Discriminator:

@@ -326,6 +326,12 @@ def _check_skills(cfg) -> str | None:
         return f"use_skills names unknown skill(s) {unknown}; skills are {names}"
     if len(set(names)) != len(names):
         return f"skill names must be unique, got {names}"
+    if cfg.ppo.mirror_loss > 0:
+        from charctl.experiments.cgail.symmetry import mirror_problem
+
+        clips = [s.clip for s in cfg.skills if not cfg.use_skills or s.name in cfg.use_skills]
+        if (msg := mirror_problem(clips, bool(cfg.cgail.conditional), cfg.env.shoulder_frame)) is not None:
+            return msg
     return check_ppo(cfg.ppo)
 
 

@@ -176,4 +176,6 @@ class Config(BaseConfig):
     def cross_checks(cfg) -> str | None:
         """Cross-field checks (called by charctl.config.validate); a message or None.
         `BaseConfig.check` runs them after each field's declared choices and range."""
+        if cfg.ppo.mirror_loss > 0:
+            return "ppo.mirror_loss: srb defines no left/right mirror of its policy (only cgail does)"
         return check_ppo(cfg.ppo)
