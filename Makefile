@@ -9,6 +9,10 @@ CHARCTL := $(VENV)/bin/charctl
 # build first (see README) and runs `make install TORCH=skip`.
 TORCH ?= torch==2.13.0
 STAMP := $(VENV)/.charctl-installed
+# `make test` runs the suite in one pytest-xdist worker per core (`-n auto`), a test file per worker at a time
+# (`--dist loadfile`: a file's module fixtures, e.g. its trained smoke run, are built once); the wall times are
+# in the README's table ("Two commands"). PYTEST_PARALLEL= runs it in one process.
+PYTEST_PARALLEL ?= -n auto --dist loadfile
 export MUJOCO_GL ?= osmesa
 export PYOPENGL_PLATFORM ?= osmesa
 # The reproduction targets' multirun (-m) lines: LAUNCHER=basic runs their jobs one after another (the
@@ -47,7 +51,7 @@ render-deps: ## install the OSMesa library MuJoCo's offscreen renderer needs (De
 test: install ## install, lint (ruff), then run the whole test suite (< 10 min on 2 cores)
 	$(VENV)/bin/ruff check .
 	$(VENV)/bin/ruff format --check .
-	$(PY) -m pytest -q -m "not slow"
+	$(PY) -m pytest -q -m "not slow" $(PYTEST_PARALLEL)
 
 test-slow: install ## the slow learning checks (minutes each)
 	$(PY) -m pytest -q -m slow

@@ -172,18 +172,33 @@ def charctl_in_process(*args: str, cwd: Path | None = None) -> subprocess.Comple
     status. An exception escaping main() - a traceback for the user - comes back as its traceback on
     stderr with status 1, so `assert_one_line_error` names it. Use `run_charctl` where the test needs a
     real process: signals, environment read at start-up, fault hooks."""
+    from charctl.cli import main
+
+    return _main_in_process(main, ["charctl", *args], cwd)
+
+
+def script_in_process(name: str, *args: str) -> subprocess.CompletedProcess:
+    """`python scripts/<name>.py ARGS` through the script's `main()` in this process (a fresh load of the
+    module), captured as `charctl_in_process` captures charctl: the same exit status and streams as the
+    interpreter gives (`raise SystemExit("error: ...")` prints its message on stderr with status 1), without
+    the ~3 s interpreter and torch start-up of a subprocess."""
+    return _main_in_process(load_script(name).main, [f"scripts/{name}.py", *args], None)
+
+
+def _main_in_process(main, argv: list[str], cwd: Path | None) -> subprocess.CompletedProcess:
+    """Run `main()` with sys.argv = `argv` in `cwd`, stdout and stderr captured, rich output wide and colourless;
+    SystemExit and an escaping exception become the exit status (and message or traceback) the interpreter
+    would give."""
     import contextlib
     import io
     import traceback
-
-    from charctl.cli import main
 
     out, err = io.StringIO(), io.StringIO()
     old_argv, old_cwd = sys.argv, os.getcwd()
     rich_env = {"COLUMNS": "250", "NO_COLOR": "1", "TERM": "dumb"}
     old_env = {k: os.environ.get(k) for k in rich_env}
     os.environ.update(rich_env)
-    sys.argv = ["charctl", *args]
+    sys.argv = list(argv)
     try:
         if cwd is not None:
             os.chdir(cwd)
@@ -193,6 +208,8 @@ def charctl_in_process(*args: str, cwd: Path | None = None) -> subprocess.Comple
                 code = 0
             except SystemExit as exc:
                 code = exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 1)
+                if exc.code is not None and not isinstance(exc.code, int):
+                    print(exc.code, file=sys.stderr)
             except Exception:
                 traceback.print_exc(file=sys.stderr)
                 code = 1
@@ -204,7 +221,7 @@ def charctl_in_process(*args: str, cwd: Path | None = None) -> subprocess.Comple
                 os.environ.pop(k, None)
             else:
                 os.environ[k] = v
-    return subprocess.CompletedProcess(["charctl", *args], code, out.getvalue(), err.getvalue())
+    return subprocess.CompletedProcess(argv, code, out.getvalue(), err.getvalue())
 
 
 @pytest.fixture

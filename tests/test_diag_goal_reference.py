@@ -3,14 +3,11 @@ frame moves on along the clip (a shuffle's stays put), and with a window the ref
 
 from __future__ import annotations
 
-import subprocess
-import sys
-
 import pytest
 
 from charctl.experiments.cgail.rollouts import load_eval_run
 
-from conftest import REPO, load_script
+from conftest import REPO, load_script, script_in_process
 
 RUN = REPO / "pretrained/cgail-3skill-fidelity"
 
@@ -38,8 +35,6 @@ def test_a_full_stride_walk_moves_its_closest_frame_along_the_clip():
     ],
 )
 def test_bad_arguments_are_one_line_errors(args, message):
-    res = subprocess.run(
-        [sys.executable, str(REPO / "scripts/diag_goal_reference.py"), str(RUN), *args], capture_output=True, text=True
-    )
+    res = script_in_process("diag_goal_reference", str(RUN), *args)
     assert res.returncode != 0 and "Traceback" not in res.stderr
     assert res.stderr.strip() == message

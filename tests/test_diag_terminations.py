@@ -4,14 +4,11 @@ step, so episodes last about one step), and falls are not counted as pose ends."
 
 from __future__ import annotations
 
-import subprocess
-import sys
-
 import pytest
 
 from charctl.experiments.cgail.rollouts import load_eval_run
 
-from conftest import REPO, load_script
+from conftest import REPO, load_script, script_in_process
 
 RUN = REPO / "pretrained/cgail-3skill-fidelity"
 
@@ -42,10 +39,6 @@ def test_each_cause_is_counted_for_its_own_radius(radii, cause):
 )
 def test_an_unknown_skill_is_a_one_line_error(script, option):
     """The diagnostics that replay a run's skills name the run's skills for a wrong one."""
-    res = subprocess.run(
-        [sys.executable, str(REPO / f"scripts/{script}.py"), str(RUN), option, "kick"],
-        capture_output=True,
-        text=True,
-    )
+    res = script_in_process(script, str(RUN), option, "kick")
     assert res.returncode != 0 and "Traceback" not in res.stderr
     assert res.stderr.strip() == f"error: unknown skill 'kick' for {RUN}; its skills are walk, run, right_kick"

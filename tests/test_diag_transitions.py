@@ -3,12 +3,9 @@ walk -> right_kick rollout whose kick rises to the clip's height after the ramp 
 
 from __future__ import annotations
 
-import subprocess
-import sys
-
 import numpy as np
 
-from conftest import REPO, load_script
+from conftest import REPO, load_script, script_in_process
 
 RUN = REPO / "pretrained/cgail-3skill-fidelity"
 
@@ -43,9 +40,5 @@ def test_walk_to_kick_on_the_shipped_policy():
 
 
 def test_a_pair_of_unknown_skills_is_one_line_and_exit_2():
-    out = subprocess.run(
-        [sys.executable, str(REPO / "scripts/diag_transitions.py"), str(RUN), "--pairs", "walk:fly"],
-        capture_output=True,
-        text=True,
-    )
+    out = script_in_process("diag_transitions", str(RUN), "--pairs", "walk:fly")
     assert out.returncode == 2 and "not: walk:fly" in out.stderr and "Traceback" not in out.stderr

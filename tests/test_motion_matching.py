@@ -3,6 +3,7 @@ error metric, CSV errors, and end-to-end smoke runs of the sweep and the export 
 
 from __future__ import annotations
 
+import copy
 import json
 
 import numpy as np
@@ -369,10 +370,15 @@ def test_blocked_frames_are_the_frames_the_search_finds_nothing_from(overrides):
     for window in range(0, 200, 2):
         db.exclude_window = paper_frames(window, cfg)
         want = [f for f in range(rows[0], db.num_frames) if db.exclude_window > 0 and db.excluded(rows, f).all()]
-        got = blocked_frames(smoke_cfg("data.mirror=false", *overrides, f"runtime.exclude_window={window}"), sources)
-        assert got[0].tolist() == want, window
+        windowed = copy.deepcopy(cfg)  # the composed config with this window (composing 100 times took ~20 s)
+        windowed.runtime.exclude_window = window
+        assert blocked_frames(windowed, sources)[0].tolist() == want, window
         seen.add(len(want))
     assert 0 in seen and len(seen) > 3  # the windows run from none blocked through some to all
+    composed = smoke_cfg("data.mirror=false", *overrides, "runtime.exclude_window=120")  # one window composed
+    windowed = copy.deepcopy(cfg)
+    windowed.runtime.exclude_window = 120
+    assert blocked_frames(composed, sources)[0].tolist() == blocked_frames(windowed, sources)[0].tolist()
 
 
 # ---------------------------------------------------------------------------- Table 1 and end to end
