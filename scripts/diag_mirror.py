@@ -21,13 +21,11 @@ from charctl.errors import CharctlError
 
 def measure(run, skill: int, envs: int, steps: int) -> tuple[float, float]:
     """(mirror loss, mean squared action) on the states of `envs` rollouts of `steps` control steps of `skill`."""
-    from charctl.experiments.cgail.symmetry import build_mirror
+    from charctl.experiments.cgail.symmetry import policy_mirror
     from charctl.rl.symmetry import mirror_loss
 
     cfg, model = run.cfg, run.agent.model
-    phase = cfg.reward.kind == "tracking" or bool(cfg.env.phase_obs)
-    clips = [s.clip_name for s in run.agent.skills]
-    m = build_mirror(clips, run.agent.conditional, cfg.env.shoulder_frame, phase).to("cpu")
+    m = policy_mirror(cfg, run.agent.skills).to("cpu")
     env = run.held_env([skill] * envs, steps / cfg.env.control_hz + 1.0, seed=0)
     states, commands = [], []
     for _ in range(steps):

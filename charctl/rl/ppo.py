@@ -59,19 +59,20 @@ class ActorCritic(nn.Module):
     def heads(self, x: torch.Tensor, low_precision: torch.dtype | None = None) -> tuple[torch.Tensor, torch.Tensor]:
         """(action mean, value) of network inputs `x`; with `low_precision` the hidden layers run under
         autocast in that dtype and the two output layers in fp32."""
-        if low_precision is None:
-            return self.actor(x), self.critic(x).squeeze(-1)
-        with torch.autocast(x.device.type, dtype=low_precision):
-            h_actor, h_critic = self.actor[:-1](x), self.critic[:-1](x)
-        return self.actor[-1](h_actor.float()), self.critic[-1](h_critic.float()).squeeze(-1)
+        return self.action_mean(x, low_precision), _in_precision(self.critic, x, low_precision).squeeze(-1)
 
     def action_mean(self, x: torch.Tensor, low_precision: torch.dtype | None = None) -> torch.Tensor:
         """The action mean of network inputs `x` alone (`heads` without the critic), in the same precision."""
-        if low_precision is None:
-            return self.actor(x)
-        with torch.autocast(x.device.type, dtype=low_precision):
-            h = self.actor[:-1](x)
-        return self.actor[-1](h.float())
+        return _in_precision(self.actor, x, low_precision)
+
+
+def _in_precision(net: nn.Sequential, x: torch.Tensor, low_precision: torch.dtype | None) -> torch.Tensor:
+    """`net(x)`, its hidden layers under autocast in `low_precision` (None: fp32) and its output layer in fp32."""
+    if low_precision is None:
+        return net(x)
+    with torch.autocast(x.device.type, dtype=low_precision):
+        h = net[:-1](x)
+    return net[-1](h.float())
 
 
 _LOG_SQRT_2PI = 0.5 * math.log(2.0 * math.pi)

@@ -73,13 +73,14 @@ def build_agent(cfg, device: str = "cpu", training: bool = True) -> Agent:
     pairs or replay buffer), for loading a checkpoint with `load_policy_state`; the networks are built
     from the same seed in the same order, so the global torch generator ends in the same state."""
     from charctl.experiments.cgail.features import DISC_OBS_DIM
+    from charctl.experiments.cgail.rules import phase_in_state
     from charctl.experiments.cgail.rules import state_dim as policy_state_width
 
     torch.manual_seed(cfg.seed)
     skills = load_skills(select_skills(cfg), cfg.env.control_hz, cfg.env.shoulder_frame)
     K = len(skills)
     conditional = bool(cfg.cgail.conditional)
-    state_dim = policy_state_width(cfg.reward.kind == "tracking" or cfg.env.phase_obs)
+    state_dim = policy_state_width(phase_in_state(cfg))
     model = ActorCritic(state_dim, 28, cfg.ppo, cond_dim=K if conditional else 0).to(device)
     if not training:
         disc = _discriminator(cfg, 2 * DISC_OBS_DIM, K).to(device)  # its normaliser comes from the checkpoint
@@ -102,13 +103,12 @@ def build_agent(cfg, device: str = "cpu", training: bool = True) -> Agent:
 
 
 def _mirror(cfg, skills: list):
-    """The policy's left/right mirror for ppo.mirror_loss (`symmetry.build_mirror`), or None when it is off."""
+    """The policy's left/right mirror for ppo.mirror_loss (`symmetry.policy_mirror`), or None when it is off."""
     if cfg.ppo.mirror_loss <= 0:
         return None
-    from charctl.experiments.cgail.symmetry import build_mirror
+    from charctl.experiments.cgail.symmetry import policy_mirror
 
-    phase = cfg.reward.kind == "tracking" or cfg.env.phase_obs
-    return build_mirror([s.clip_name for s in skills], bool(cfg.cgail.conditional), cfg.env.shoulder_frame, phase)
+    return policy_mirror(cfg, skills)
 
 
 def _discriminator(cfg, pair_dim: int, num_skills: int) -> Discriminator:

@@ -21,6 +21,12 @@ GOAL_DIM = 2  # (cos, sin) of the heading goal relative to the heading (`goal_fe
 PHASE_DIM = 2  # (cos, sin) of the clip phase (`phase_features`): tracking baseline and env.phase_obs
 
 
+def phase_in_state(cfg) -> bool:
+    """Whether the policy state of a run with config `cfg` ends with the clip phase: the tracking baseline and
+    env.phase_obs."""
+    return cfg.reward.kind == "tracking" or bool(cfg.env.phase_obs)
+
+
 def state_dim(phase: bool) -> int:
     """Width of the policy state: the features (`features.STATE_DIM`), the heading goal and, for the
     tracking baseline or a run with env.phase_obs (`phase`), the clip phase."""

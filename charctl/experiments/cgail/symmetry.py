@@ -118,6 +118,14 @@ def mirror_problem(clips: list[str], conditional: bool, shoulder_frame: str) -> 
     return None
 
 
+def policy_mirror(cfg, skills: list) -> Mirror:
+    """The mirror of the policy of a run with config `cfg` and `skills` (`SkillData`, with their clip names)."""
+    from charctl.experiments.cgail.rules import phase_in_state
+
+    clips = [s.clip_name for s in skills]
+    return build_mirror(clips, bool(cfg.cgail.conditional), cfg.env.shoulder_frame, phase_in_state(cfg))
+
+
 def build_mirror(clips: list[str], conditional: bool, shoulder_frame: str, phase: bool) -> Mirror:
     """The policy's mirror for skills with these `clips` (raises CharctlError where `mirror_problem` says)."""
     from charctl.rl.symmetry import Mirror
