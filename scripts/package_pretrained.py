@@ -10,7 +10,9 @@ in the checkpoint (networks, optimisers, normalisers, counters, RNG states) is k
 `--inference-only` also leaves out the PPO and discriminator optimiser states (Adam's moments, two
 thirds of a cgail checkpoint): evaluation and export never read them, and a resume (fine-tuning a
 shipped policy) starts those optimisers fresh, saying so. Runs meant to be continued as they were
-(pretrained/in-progress/) keep them.
+(pretrained/in-progress/) keep them; `--bf16-moments` stores those moments in bfloat16 (a third of the
+checkpoint saved; torch's `Optimizer.load_state_dict` casts them back to float32 on resume, so the
+continued run starts from moments rounded to 8 significant bits, not bit-identical ones).
 
 The scalars are rewritten into one event file, each tag thinned to at most `--max-points` evenly
 spaced points (first and last kept, step and wall time unchanged; 0 = copy the event files as they
@@ -59,6 +61,21 @@ def drop_optimizer_states(state: dict) -> None:
     state["inference_only"] = True
 
 
+def bf16_optimizer_moments(state: dict) -> int:
+    """Cast the floating-point per-parameter tensors of a cgail checkpoint state's optimiser states (Adam's
+    exp_avg and exp_avg_sq; not `step`) to bfloat16, in place; returns how many tensors were cast."""
+    import torch
+
+    cast = 0
+    for opt in (state.get("ppo", {}).get("optimizer"), state.get("disc_opt")):
+        for per_param in (opt or {}).get("state", {}).values():
+            for key, value in per_param.items():
+                if key != "step" and torch.is_tensor(value) and value.is_floating_point():
+                    per_param[key] = value.to(torch.bfloat16)
+                    cast += 1
+    return cast
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("run_dir", type=Path)
@@ -75,7 +92,15 @@ def main() -> None:
         action="store_true",
         help="leave out the optimiser states too (a resume then starts them fresh)",
     )
+    ap.add_argument(
+        "--bf16-moments",
+        action="store_true",
+        help="store the optimiser moments in bfloat16 (a resumable package a third smaller; resumes from rounded "
+        "moments)",
+    )
     a = ap.parse_args()
+    if a.inference_only and a.bf16_moments:
+        raise SystemExit("error: --bf16-moments keeps the optimiser states that --inference-only leaves out; pass one")
     import json
 
     import torch
@@ -95,6 +120,8 @@ def main() -> None:
     payload["state"].pop("replay", None)
     if a.inference_only:
         drop_optimizer_states(payload["state"])
+    if a.bf16_moments and bf16_optimizer_moments(payload["state"]) == 0:
+        raise SystemExit(f"error: {source} holds no optimiser moments to store in bfloat16")
     chosen = source.name != "last.pt"
     a.dest.mkdir(parents=True, exist_ok=True)
     for name in ("config.yaml", "metrics.json"):  # an interrupted run has no metrics.json

@@ -85,3 +85,47 @@ def test_an_inference_only_package_evaluates_and_fine_tunes_with_fresh_optimiser
     assert "optimiser states" in capsys.readouterr().out
     resumed = torch.load(slim / "checkpoints" / "last.pt", map_location="cpu", weights_only=True)["state"]
     assert int(resumed["samples"]) > samples and "optimizer" in resumed["ppo"] and "disc_opt" in resumed
+
+
+def test_bf16_moments_shrink_a_resumable_package_that_resumes_with_float32_moments(smoke_run, tmp_path, monkeypatch):
+    """--bf16-moments keeps both optimiser states with Adam's moments in bfloat16 (the checkpoint shrinks by
+    about a third of the full one: moments are two thirds of it, halved); a resume loads them back as float32
+    equal to the rounded originals and trains on."""
+    from charctl.commands.train import train_command
+    from charctl.experiments.cgail.agent import build_agent, load_agent_state
+    from charctl.experiments.cgail.policy import load_trained_run
+
+    mod = _load_script()
+    src = smoke_run("cgail")
+    full, half = tmp_path / "full", tmp_path / "half"
+    for dest, extra in ((full, []), (half, ["--bf16-moments"])):
+        monkeypatch.setattr("sys.argv", ["package_pretrained.py", str(src), str(dest), *extra])
+        mod.main()
+    size = {d: (d / "checkpoints" / "last.pt").stat().st_size for d in (full, half)}
+    assert 0.55 * size[full] < size[half] < 0.75 * size[full]
+    original = torch.load(full / "checkpoints" / "last.pt", map_location="cpu", weights_only=True)["state"]
+    rounded = torch.load(half / "checkpoints" / "last.pt", map_location="cpu", weights_only=True)["state"]
+    moments = rounded["ppo"]["optimizer"]["state"][0]
+    assert moments["exp_avg"].dtype == torch.bfloat16 and moments["step"].dtype == torch.float32
+    agent = build_agent(load_trained_run(half).cfg)
+    load_agent_state(agent, rounded)
+    loaded = agent.ppo.optimizer.state_dict()["state"][0]["exp_avg"]
+    expected = original["ppo"]["optimizer"]["state"][0]["exp_avg"].to(torch.bfloat16).float()
+    assert loaded.dtype == torch.float32 and torch.equal(loaded, expected)
+    samples = int(rounded["samples"])
+    train_command("cgail", [f"train.total_samples={samples + 256}"], resume=half)
+    resumed = torch.load(half / "checkpoints" / "last.pt", map_location="cpu", weights_only=True)["state"]
+    assert int(resumed["samples"]) > samples
+    assert resumed["disc_opt"]["state"][0]["exp_avg_sq"].dtype == torch.float32
+
+
+def test_bf16_moments_and_inference_only_together_are_refused_before_writing(smoke_run, tmp_path, monkeypatch):
+    import pytest
+
+    mod = _load_script()
+    dest = tmp_path / "packaged"
+    argv = ["package_pretrained.py", str(smoke_run("cgail")), str(dest), "--bf16-moments", "--inference-only"]
+    monkeypatch.setattr("sys.argv", argv)
+    with pytest.raises(SystemExit, match="pass one"):
+        mod.main()
+    assert not dest.exists()
