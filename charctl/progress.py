@@ -6,11 +6,24 @@ import sys
 import time
 
 
+def eta_text(remaining: float, rate: float) -> str:
+    """Time left for `remaining` units at `rate` units/s, as the plain line shows it: "ETA 2h 05m", "ETA 4m 10s",
+    "ETA 9s"; "ETA ?" before any rate is measured."""
+    if rate <= 0.0:
+        return "ETA ?"
+    s = int(round(max(remaining, 0.0) / rate))
+    h, m = divmod(s // 60, 60)
+    if h:
+        return f"ETA {h}h {m:02d}m"
+    return f"ETA {m}m {s % 60:02d}s" if m else f"ETA {s}s"
+
+
 class TrainingProgress:
     """A progress bar over `total` samples (or generations, frames ...) with rate and ETA.
 
     `update(n, **stats)` advances by n and shows the latest stats (e.g. r_S=0.61) on the bar.
-    On a non-terminal (CI, pipes) it prints one plain line every `plain_every` seconds instead.
+    On a non-terminal (CI, pipes, nohup) it prints one plain line every `plain_every` seconds instead, with the
+    same rate and ETA (`eta_text`).
     """
 
     def __init__(self, total: float, description: str, unit: str = "samples", plain_every: float = 10.0):
@@ -84,7 +97,8 @@ class TrainingProgress:
             pct = 100.0 * self.done / max(self.total, 1e-9)
             print(
                 f"{self.description}: {self.done:,.0f}/{self.total:,.0f} {self.unit} "
-                f"({pct:.0f}%), {self.rate:,.0f} {self.unit}/s  {getattr(self, '_stats', '')}",
+                f"({pct:.0f}%), {self.rate:,.0f} {self.unit}/s, {eta_text(self.total - self.done, self.rate)}  "
+                f"{getattr(self, '_stats', '')}",
                 file=sys.stderr,
                 flush=True,
             )
