@@ -181,10 +181,10 @@ repro-cgail-10skill-track-skills: install ## cgail: the window run's ten-skill c
 # The shipped ten-skill command with the mirror loss on the mirrored pairs from the first sample and breakdance's
 # tracking weight at 8 (docs/cgail.md, "Ten skills from scratch with the mirror loss"): the mirror fine-tune made the
 # kicks symmetric, and w_T 8 is the only change that lifted breakdance past 0.5, both only late in a run. Started
-# 2026-12-07; ~10 h at this machine's ~4k samples/s, so it is continued across sessions with --resume from
+# 2026-12-07; ~12.7 h at this AMD machine's 3.3k samples/s, so it is continued across sessions with --resume from
 # pretrained/in-progress/cgail-10skill-mirror (scripts/package_pretrained.py --bf16-moments).
 .PHONY: repro-cgail-10skill-mirror
-repro-cgail-10skill-mirror: install ## cgail: the shipped ten-skill command plus ppo.mirror_loss=1 and breakdance's w_track 8 (1.5e8 samples; ~10 h on 2 cores, resumable), evaluated
+repro-cgail-10skill-mirror: install ## cgail: the shipped ten-skill command plus ppo.mirror_loss=1 and breakdance's w_track 8 (1.5e8 samples; ~13 h on 2 cores, resumable), evaluated
 	$(CHARCTL) train cgail "use_skills=[]" "reward.w_track_skills={spindance:4.0,breakdance:8.0}" reward.root_height_threshold=0.15 reward.yaw_error_threshold=1.5 reward.goal_reference_window=3 ppo.mirror_loss=1.0 train.fidelity_every=2000000 train.total_samples=150000000 train.checkpoint_every=20 train.keep_checkpoint_every=2500000 seed=1 output_root=$(CGAIL_FID)/mirror-10skill
 	T=$$(ls -d $(CGAIL_FID)/mirror-10skill/cgail/*/ | tail -1); \
 	$(call cgail-evaluate,$$T)
