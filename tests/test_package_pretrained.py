@@ -14,6 +14,13 @@ def _load_script():
     return load_script("package_pretrained")
 
 
+def _package(mod, monkeypatch, src, *packages: tuple) -> None:
+    """Run the script on `src` once per (dest, extra flags) in `packages`, as from the command line."""
+    for dest, extra in packages:
+        monkeypatch.setattr("sys.argv", ["package_pretrained.py", str(src), str(dest), *extra])
+        mod.main()
+
+
 def test_thinned_indices_keep_first_and_last():
     mod = _load_script()
     assert mod.thinned_indices(5, 10).tolist() == [0, 1, 2, 3, 4]
@@ -70,9 +77,7 @@ def test_an_inference_only_package_evaluates_and_fine_tunes_with_fresh_optimiser
     mod = _load_script()
     src = smoke_run("cgail")
     full, slim = tmp_path / "full", tmp_path / "slim"
-    for dest, extra in ((full, []), (slim, ["--inference-only"])):
-        monkeypatch.setattr("sys.argv", ["package_pretrained.py", str(src), str(dest), *extra])
-        mod.main()
+    _package(mod, monkeypatch, src, (full, []), (slim, ["--inference-only"]))
     payload = torch.load(slim / "checkpoints" / "last.pt", map_location="cpu", weights_only=True)
     state = payload["state"]
     assert state["inference_only"] and "disc_opt" not in state and set(state["ppo"]) == {"model"}
@@ -97,9 +102,7 @@ def test_bf16_moments_shrink_a_resumable_package_that_resumes_with_float32_momen
     mod = _load_script()
     src = smoke_run("cgail")
     full, half = tmp_path / "full", tmp_path / "half"
-    for dest, extra in ((full, []), (half, ["--bf16-moments"])):
-        monkeypatch.setattr("sys.argv", ["package_pretrained.py", str(src), str(dest), *extra])
-        mod.main()
+    _package(mod, monkeypatch, src, (full, []), (half, ["--bf16-moments"]))
     size = {d: (d / "checkpoints" / "last.pt").stat().st_size for d in (full, half)}
     assert 0.55 * size[full] < size[half] < 0.75 * size[full]
     original = torch.load(full / "checkpoints" / "last.pt", map_location="cpu", weights_only=True)["state"]
