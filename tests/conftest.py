@@ -11,6 +11,7 @@ import json
 import os
 import subprocess
 import sys
+import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -276,16 +277,27 @@ def write_motion(tmp_path):
 @pytest.fixture(scope="session")
 def smoke_run(tmp_path_factory):
     """`charctl train NAME scale=smoke` through the installed console script, once per experiment and
-    session (tests/test_smoke.py checks every one); returns NAME -> its run directory. Tests that
+    pytest run (tests/test_smoke.py checks every one); returns NAME -> its run directory. Under
+    pytest-xdist the workers share one copy: the first to ask trains it under a file lock in the run's
+    common temp folder, the others wait for it and read it. Tests only read these runs; those that
     change a run (resume, evaluation files) take a copy with `smoke_run_copy`."""
-    root = tmp_path_factory.mktemp("smoke_runs")
+    from filelock import FileLock
+
+    base = tmp_path_factory.getbasetemp()
+    shared = base.parent if os.environ.get("PYTEST_XDIST_WORKER") else base  # xdist: <basetemp>/popen-gwN
     runs: dict[str, Path] = {}
 
     def get(name: str) -> Path:
         if name not in runs:
-            res = run_charctl("train", name, "scale=smoke", f"output_root={root}", timeout=600)
-            assert res.returncode == 0, res.stdout + res.stderr
-            (runs[name],) = (root / name).iterdir()
+            done = shared / f"smoke-{name}.path"  # written only after a successful run
+            with FileLock(str(shared / f"smoke-{name}.lock")):
+                if not done.exists():
+                    root = Path(tempfile.mkdtemp(prefix=f"smoke-{name}-", dir=shared))
+                    res = run_charctl("train", name, "scale=smoke", f"output_root={root}", timeout=600)
+                    assert res.returncode == 0, res.stdout + res.stderr
+                    (run_dir,) = (root / name).iterdir()
+                    done.write_text(str(run_dir))
+            runs[name] = Path(done.read_text())
         return runs[name]
 
     return get
