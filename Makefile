@@ -25,9 +25,10 @@ $(error LAUNCHER must be basic or ray, not '$(LAUNCHER)')
 endif
 LAUNCH := $(if $(filter ray,$(LAUNCHER)),--launcher ray$(if $(RAY_ADDRESS), --address $(RAY_ADDRESS)))
 
-# pip compiles what it installs to bytecode one file at a time, the packages' test folders included (~160 s of a
-# fresh install here); `--no-compile`, then this on every core without those folders, takes ~95 s. Its result is
-# ignored: some packages ship a file for a newer Python (torch's py312_intrinsics.py), which pip skips too.
+# pip compiles what it installs to bytecode one file at a time, the packages' test folders included; `--no-compile`,
+# then this on every core without those folders, took a fresh `make test`'s set-up from 174 s to 143 s here (2 cores;
+# README "Two commands"). Its result is ignored: some packages ship a file for a newer Python (torch's
+# py312_intrinsics.py), which pip skips too.
 define COMPILE_VENV
 import compileall, re, sys
 compileall.compile_dir(sys.argv[1] + "/lib", quiet=2, workers=0, rx=re.compile(r"site-packages/.*/tests?/"))
