@@ -25,26 +25,6 @@ VENV_BIN = Path(sys.executable).parent
 CHARCTL = VENV_BIN / "charctl"
 
 
-# The longest test files (`pytest --durations=0` on 2 cores, seconds in brackets), run first: `make test` hands whole
-# files to its workers (`--dist loadfile`) in collection order, and test_web.py, last by name, used to run alone at the
-# end while the other worker idled. The other files keep their order.
-LONGEST_FIRST = (
-    "test_faults.py",  # (166)
-    "test_web.py",  # (111)
-    "test_mode_arguments.py",  # (46)
-    "test_hopper_ga_pipeline.py",  # (38)
-    "test_ray_launcher.py",  # (35)
-    "test_config_ranges.py",  # (31)
-    "test_cgail_eval.py",  # (29)
-    "test_config_cli.py",  # (28)
-)
-
-
-def pytest_collection_modifyitems(config, items) -> None:
-    rank = {name: i for i, name in enumerate(LONGEST_FIRST)}
-    items.sort(key=lambda item: rank.get(item.path.name, len(rank)))  # a stable sort
-
-
 FAULT_HOOKS = REPO / "tests" / "fault_hooks"  # sitecustomize.py: CHARCTL_FAULT_* checkpoint faults
 
 
