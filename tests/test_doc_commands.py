@@ -184,10 +184,34 @@ def test_cheap_command_runs_as_written(cmd, tmp_path):
     assert "Traceback" not in res.stderr
 
 
+def _value_after(argv: list[str], flag: str) -> str | None:
+    """The token after a flag ('' when the flag ends the line or is followed by an option), None without it."""
+    if flag not in argv:
+        return None
+    rest = argv[argv.index(flag) + 1 :]
+    return rest[0] if rest and not rest[0].startswith("-") and "=" not in rest[0] else ""
+
+
+def test_runnable_commands_name_runs_the_slow_tier_can_substitute():
+    """What the slow tier would fail on with "not a run directory": a run named by an upper-case word it does not
+    substitute (FOLDER, COPY; only the placeholders and an output DIR), a bare `--resume`, and a `--checkpoint`
+    other than last.pt (a smoke run keeps no `samples_<n>.pt` of a documented run)."""
+    unknown = {
+        c.id: tok
+        for c in RUNNABLE
+        for tok in c.argv
+        if re.fullmatch(r"[A-Z][A-Z_]+", tok) and tok not in RUN_PLACEHOLDERS | {"DIR"}
+    }
+    bare_resume = [c.id for c in RUNNABLE if _value_after(c.argv, "--resume") == ""]
+    checkpoints = {c.id: v for c in RUNNABLE if (v := _value_after(c.argv, "--checkpoint")) not in (None, "last.pt")}
+    assert (unknown, bare_resume, checkpoints) == ({}, [], {})
+
+
 # ---------------------------------------------------------------------------- slow tier
 SMOKE_RUNS = {
     # the skills the pages' cgail commands name (walk, run, right_kick); AMP = the unconditional baseline
-    "cgail": ["train", "cgail", "scale=smoke", "use_skills=[walk,run,right_kick]"],
+    # the small preset's pose check on, so the pages' resumes that add its keys (goal_reference_window) validate
+    "cgail": ["train", "cgail", "scale=smoke", "use_skills=[walk,run,right_kick]", "reward.pose_error_threshold=0.5"],
     "cgail-amp": ["train", "cgail", "scale=smoke", "use_skills=[walk]", "cgail.conditional=false"],
     "srb": ["train", "srb", "scale=smoke"],
     "com-cnn": ["train", "com-cnn", "scale=smoke"],
