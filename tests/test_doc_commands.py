@@ -212,6 +212,14 @@ SMOKE_RUNS = {
     # the skills the pages' cgail commands name (walk, run, right_kick); AMP = the unconditional baseline
     # the small preset's pose check on, so the pages' resumes that add its keys (goal_reference_window) validate
     "cgail": ["train", "cgail", "scale=smoke", "use_skills=[walk,run,right_kick]", "reward.pose_error_threshold=0.5"],
+    # a mirrored pair for the pages' `--resume RUN ppo.mirror_loss=...` (the loss needs a skill and its mirror)
+    "cgail-mirror": [
+        "train",
+        "cgail",
+        "scale=smoke",
+        "use_skills=[walk,right_kick,left_kick]",
+        "reward.pose_error_threshold=0.5",
+    ],
     "cgail-amp": ["train", "cgail", "scale=smoke", "use_skills=[walk]", "cgail.conditional=false"],
     "srb": ["train", "srb", "scale=smoke"],
     "com-cnn": ["train", "com-cnn", "scale=smoke"],
@@ -256,6 +264,8 @@ def _run_kind(token: str, cmd: DocCommand, position: int) -> str:
         return "cgail-amp"
     if token in ("RUN_CGAIL", "CGAIL"):
         return "cgail"
+    if "ppo.mirror_loss=" in cmd.text:
+        return "cgail-mirror"
     if token == "SRB_RUN":
         return "srb"
     exp = cmd.page_experiment or "cgail"
@@ -328,6 +338,10 @@ def smoke_argv(cmd: DocCommand, runs, cwd: Path) -> list[str]:
             out.append(budget)
     elif command in ("train", "tune"):
         out += ["scale=smoke", f"output_root={runs.work / 'outputs'}"]
+        if target == "cgail" and not any(a.startswith("reward.pose_error_threshold=") for a in out):
+            out.append(
+                "reward.pose_error_threshold=0.5"
+            )  # the pages' commands are written for scale=small's pose check
     elif command in ("eval", "export") and target == "motion-matching":
         out += ["scale=smoke", f"output_root={runs.work / 'outputs'}"]
     elif command in ("eval", "export", "play") and target in EXPERIMENTS:
