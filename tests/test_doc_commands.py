@@ -23,6 +23,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
+import yaml
 
 from conftest import REPO, assert_one_line_error, charctl_in_process, cli_env, run_charctl
 
@@ -208,17 +209,20 @@ def test_runnable_commands_name_runs_the_slow_tier_can_substitute():
 
 
 # ---------------------------------------------------------------------------- slow tier
+# the pages' cgail commands are written for scale=small, whose pose check the smoke preset leaves off: its value,
+# read from the small preset, is added to the smoke runs and to the pages' cgail train commands
+_SMALL_CGAIL = yaml.safe_load((REPO / "conf/preset/cgail/small.yaml").read_text())
+SMALL_POSE_CHECK = f"reward.pose_error_threshold={_SMALL_CGAIL['reward']['pose_error_threshold']}"
 SMOKE_RUNS = {
     # the skills the pages' cgail commands name (walk, run, right_kick); AMP = the unconditional baseline
-    # the small preset's pose check on, so the pages' resumes that add its keys (goal_reference_window) validate
-    "cgail": ["train", "cgail", "scale=smoke", "use_skills=[walk,run,right_kick]", "reward.pose_error_threshold=0.5"],
+    "cgail": ["train", "cgail", "scale=smoke", "use_skills=[walk,run,right_kick]", SMALL_POSE_CHECK],
     # a mirrored pair for the pages' `--resume RUN ppo.mirror_loss=...` (the loss needs a skill and its mirror)
     "cgail-mirror": [
         "train",
         "cgail",
         "scale=smoke",
         "use_skills=[walk,right_kick,left_kick]",
-        "reward.pose_error_threshold=0.5",
+        SMALL_POSE_CHECK,
     ],
     "cgail-amp": ["train", "cgail", "scale=smoke", "use_skills=[walk]", "cgail.conditional=false"],
     "srb": ["train", "srb", "scale=smoke"],
@@ -339,9 +343,7 @@ def smoke_argv(cmd: DocCommand, runs, cwd: Path) -> list[str]:
     elif command in ("train", "tune"):
         out += ["scale=smoke", f"output_root={runs.work / 'outputs'}"]
         if target == "cgail" and not any(a.startswith("reward.pose_error_threshold=") for a in out):
-            out.append(
-                "reward.pose_error_threshold=0.5"
-            )  # the pages' commands are written for scale=small's pose check
+            out.append(SMALL_POSE_CHECK)
     elif command in ("eval", "export") and target == "motion-matching":
         out += ["scale=smoke", f"output_root={runs.work / 'outputs'}"]
     elif command in ("eval", "export", "play") and target in EXPERIMENTS:
