@@ -22,43 +22,23 @@ import json
 import sys
 from pathlib import Path
 
+from charctl.experiments.cgail.signatures import (
+    SIGNATURE_WITHIN,
+    kicking_foot,
+    named_signatures,
+    signature_value,
+    within,
+)
+
 THREE = ("walk", "run", "right_kick")
 THREE_BOUNDS = {"coverage": 0.6, "body_error": 0.15, "kick_foot": 0.8, "run_within": 0.25, "no_fall": 0.9}
-TEN_BOUNDS = {"coverage": 0.5, "signature_within": 0.3, "dtw_skills": 7, "no_fall": 0.8}
+TEN_BOUNDS = {"coverage": 0.5, "signature_within": SIGNATURE_WITHIN, "dtw_skills": 7, "no_fall": 0.8}
 SWITCH_NEEDED = 6  # of 8 trials (issue 24), also the matrix row's bar
 
 
 def _load(folder: Path, name: str) -> dict | None:
     path = folder / name
     return json.loads(path.read_text()) if path.is_file() else None
-
-
-def clip_base(clip: str) -> str:
-    """The clip's file name without the ':mirror' suffix of a mirrored skill ('kick:mirror' -> 'kick')."""
-    return clip.split(":")[0]
-
-
-def kicking_foot(sig: dict) -> str:
-    """'right' or 'left': the foot that rises higher in the clip's signature `sig` (`fidelity.json` reference)."""
-    return "right" if sig["right_foot_peak"] >= sig["left_foot_peak"] else "left"
-
-
-def within(value: float, reference: float, share: float) -> bool:
-    """|value - reference| <= share x |reference|."""
-    return abs(value - reference) <= share * abs(reference)
-
-
-def named_signatures(clip: str) -> list[str]:
-    """The signature entries the ten-skill target names for a skill of clip `clip`: the kicks' and the spinkick's
-    foot peak ('foot'), the jump's 'airborne' share and the spins' 'yaw_rate'."""
-    base = clip_base(clip)
-    return {"kick": ["foot"], "spinkick": ["foot", "yaw_rate"], "jump": ["airborne"], "dance_a": ["yaw_rate"]}.get(
-        base, []
-    )
-
-
-def signature_value(sig: dict, name: str, foot: str) -> float:
-    return sig[f"{foot}_foot_peak"] if name == "foot" else sig[name]
 
 
 def run_label(table: dict) -> str:

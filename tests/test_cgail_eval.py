@@ -193,4 +193,6 @@ def test_eval_checkpoints_ranks_an_amp_run_by_fidelity(smoke_runs, tmp_path, cha
     assert row["min_coverage"] == min(row["fidelity"]["coverage"].values())
     assert report["chosen"]["checkpoint"] == "last.pt" and report["confirm"]["seed"] == 7
     md = (out / "checkpoints.md").read_text()
-    assert "| samples | worst no-fall | skills at coverage >= 0.5 | min coverage |" in md and "diagonal |" not in md
+    head = "| samples | worst no-fall | skills performed (coverage >= 0.5, signature) | min coverage |"
+    assert head in md and "diagonal |" not in md
+    assert set(row["fidelity"]["signature_met"]) == set(row["fidelity"]["coverage"])

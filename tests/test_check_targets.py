@@ -131,3 +131,26 @@ def test_a_folder_without_a_fidelity_evaluation_is_a_one_line_error(tmp_path, ca
         ct.check(tmp_path)
     assert ct.main([str(tmp_path / "nope")]) == 2
     assert capsys.readouterr().err.strip() == f"error: {tmp_path / 'nope'} is not a folder"
+
+
+def test_signatures_met_by_hand():
+    """The ten-skill rule (charctl/experiments/cgail/signatures.py), by hand: a kick counts when its kicking foot
+    (the one higher in the clip) peaks within 30 % of the clip's 1.28 m, so 0.90 (0.70 x) passes and 0.89 does not;
+    a left kick is judged on the left foot; the spinkick needs both its foot and its yaw rate; a punch names no
+    signature, so it always passes."""
+    from charctl.experiments.cgail.signatures import signatures_met
+
+    clip = _sig(right_foot=1.28, left_foot=0.1, yaw_rate=2.0)
+
+    def entry(name, policy, reference=clip):
+        return {"clip": name, "policy": policy, "reference": reference}
+
+    assert signatures_met(entry("kick", _sig(right_foot=0.90)))
+    assert not signatures_met(entry("kick", _sig(right_foot=0.89)))
+    assert not signatures_met(entry("kick", _sig(right_foot=0.2, left_foot=1.28)))  # the other foot
+    mirrored = _sig(right_foot=0.1, left_foot=1.28)
+    assert signatures_met(entry("kick:mirror", _sig(left_foot=1.0), mirrored))
+    spin = _sig(right_foot=1.74, yaw_rate=4.94)
+    assert not signatures_met(entry("spinkick", _sig(right_foot=1.79, yaw_rate=1.07), spin))
+    assert signatures_met(entry("spinkick", _sig(right_foot=1.79, yaw_rate=4.5), spin))
+    assert signatures_met(entry("punch", _sig(), clip))

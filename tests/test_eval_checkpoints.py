@@ -213,7 +213,8 @@ def test_cgail_amp_run_is_ranked_by_fidelity_and_refuses_the_classifier_options(
         assert_one_line(exc.value, "AMP (unconditional)", flag)
     ev = checkpoints([str(run)], {}, [])
     assert not ev.conditional and ev.rank == "fidelity" and ev.fidelity
-    amp_row = {"min_coverage": 0.5, "worst_no_fall": 0.75, "min_diagonal": None, "fidelity": {"coverage": {"w": 0.5}}}
+    fid = {"coverage": {"w": 0.5}, "signature_met": {"w": True}}
+    amp_row = {"min_coverage": 0.5, "worst_no_fall": 0.75, "min_diagonal": None, "fidelity": fid}
     assert ev.rank_key(amp_row) == (1, 0.5, 0.75)
     assert sorted(p.name for p in tmp_path.rglob("*")) == ["amp", "config.yaml"]
 
@@ -221,13 +222,14 @@ def test_cgail_amp_run_is_ranked_by_fidelity_and_refuses_the_classifier_options(
 def test_cgail_fidelity_rank_counts_the_skills_at_the_coverage_target_first(tmp_path):
     """By hand: A has two of three skills at coverage >= 0.5 (lowest 0.10), B one (lowest 0.20). The fidelity rank
     picks A (2 > 1) where the lowest coverage alone would pick B; with --min-coverage 0.7 A counts one skill,
-    B none; equal counts fall to the lowest coverage, then the worst no-fall, then the diagonal."""
+    B none; equal counts fall to the lowest coverage, then the worst no-fall, then the diagonal. A skill whose
+    named signature misses (a kick covered by its guard) is not counted, whatever its coverage."""
     from charctl.experiments.cgail.eval_checkpoints import checkpoints, rank_key
 
     def row(coverage, no_fall=0.9, diagonal=0.95):
         cov = dict(zip(("walk", "kick", "spin"), coverage))
         return {
-            "fidelity": {"coverage": cov},
+            "fidelity": {"coverage": cov, "signature_met": dict.fromkeys(cov, True)},
             "min_coverage": min(coverage),
             "worst_no_fall": no_fall,
             "min_diagonal": diagonal,
@@ -240,6 +242,10 @@ def test_cgail_fidelity_rank_counts_the_skills_at_the_coverage_target_first(tmp_
     assert (
         max((row([0.5, 0.1, 0.3]), row([0.5, 0.2, 0.0])), key=lambda r: rank_key(r, "fidelity"))["min_coverage"] == 0.1
     )
+    kicks, guard = row([0.9, 0.6, 0.6]), row([0.9, 0.6, 0.6])
+    guard["fidelity"]["signature_met"]["kick"] = False  # the kick's coverage from its guard, the foot down
+    assert rank_key(kicks, "fidelity")[0] == 3 and rank_key(guard, "fidelity")[0] == 2
+    assert max((guard, kicks), key=lambda r: rank_key(r, "fidelity")) is kicks
     run = tmp_path / "cgail"
     run.mkdir()
     (run / "config.yaml").write_text("experiment: cgail\n")

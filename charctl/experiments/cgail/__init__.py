@@ -70,7 +70,8 @@ EXPERIMENT = Experiment(
         ),
         Option(
             "rank",
-            "with --checkpoints: fidelity (default: the most skills at pose coverage >= --min-coverage, then the "
+            "with --checkpoints: fidelity (default: the most skills at pose coverage >= --min-coverage with their "
+            "named signature (kick foot peak, jump flight, spin yaw rate) within 30 % of the clip's, then the "
             "largest lowest coverage, the worst no-fall, the lowest diagonal; implies --fidelity) or margin (the "
             "largest margin over both targets)",
             str,
