@@ -182,11 +182,14 @@ repro-cgail-10skill-track-skills: install ## cgail: the window run's ten-skill c
 # tracking weight at 8 (docs/cgail.md, "Ten skills from scratch with the mirror loss"): the mirror fine-tune made the
 # kicks symmetric, and w_T 8 is the only change that lifted breakdance past 0.5, both only late in a run. Started
 # 2026-12-07; ~12.7 h at this AMD machine's 3.3k samples/s, so it is continued across sessions with --resume from
-# pretrained/in-progress/cgail-10skill-mirror (scripts/package_pretrained.py --bf16-moments).
+# pretrained/in-progress/cgail-10skill-mirror (scripts/package_pretrained.py --bf16-moments). At 84,049,920 samples
+# (2026-12-08) neither kick nor the spinkick was performed (kicking feet ~0.2 m in training from 7.4e7, where the
+# shipped run's reached 0.6-1.3 m), so the loss was switched off for the rest: `--resume RUN ppo.mirror_loss=0.0`.
 .PHONY: repro-cgail-10skill-mirror
-repro-cgail-10skill-mirror: install ## cgail: the shipped ten-skill command plus ppo.mirror_loss=1 and breakdance's w_track 8 (1.5e8 samples; ~13 h on 2 cores, resumable), evaluated
-	$(CHARCTL) train cgail "use_skills=[]" "reward.w_track_skills={spindance:4.0,breakdance:8.0}" reward.root_height_threshold=0.15 reward.yaw_error_threshold=1.5 reward.goal_reference_window=3 ppo.mirror_loss=1.0 train.fidelity_every=2000000 train.total_samples=150000000 train.checkpoint_every=20 train.keep_checkpoint_every=2500000 seed=1 output_root=$(CGAIL_FID)/mirror-10skill
+repro-cgail-10skill-mirror: install ## cgail: the shipped ten-skill command plus breakdance's w_track 8 and ppo.mirror_loss=1 for the first 8.4e7 samples, then 0 (1.5e8 samples; ~13 h on 2 cores, resumable), evaluated
+	$(CHARCTL) train cgail "use_skills=[]" "reward.w_track_skills={spindance:4.0,breakdance:8.0}" reward.root_height_threshold=0.15 reward.yaw_error_threshold=1.5 reward.goal_reference_window=3 ppo.mirror_loss=1.0 train.fidelity_every=2000000 train.total_samples=84049920 train.checkpoint_every=20 train.keep_checkpoint_every=2500000 seed=1 output_root=$(CGAIL_FID)/mirror-10skill
 	T=$$(ls -d $(CGAIL_FID)/mirror-10skill/cgail/*/ | tail -1); \
+	$(CHARCTL) train cgail --resume $$T ppo.mirror_loss=0.0 train.total_samples=150000000 && \
 	$(call cgail-evaluate,$$T)
 
 # Ten skills with both radii (docs/cgail.md, "Ten skills with a root-height and a heading radius"): the flight experiment's
