@@ -2,7 +2,7 @@
 
     .venv/bin/python scripts/package_pretrained.py RUN_DIR pretrained/<name> [--max-points 500]
 
-Keeps config.yaml, metrics.json, the TensorBoard scalars and checkpoints/last.pt without the
+Keeps config.yaml, metrics.json, resumes.txt, the TensorBoard scalars and checkpoints/last.pt without the
 discriminator's replay buffer (tens of MB of policy samples that only a resumed training run
 would use; a resume from the packaged checkpoint starts with an empty buffer). Everything else
 in the checkpoint (networks, optimisers, normalisers, counters, RNG states) is kept, so
@@ -124,7 +124,8 @@ def main() -> None:
         raise SystemExit(f"error: {source} holds no optimiser moments to store in bfloat16")
     chosen = source.name != "last.pt"
     a.dest.mkdir(parents=True, exist_ok=True)
-    for name in ("config.yaml", "metrics.json"):  # an interrupted run has no metrics.json
+    # an interrupted run has no metrics.json; resumes.txt: a resumed run's override history (charctl/runs.py)
+    for name in ("config.yaml", "metrics.json", "resumes.txt"):
         if (a.run_dir / name).is_file():
             shutil.copy2(a.run_dir / name, a.dest / name)
     if chosen:

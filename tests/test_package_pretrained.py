@@ -47,7 +47,7 @@ def test_packaged_smoke_run_has_thinned_scalars_and_no_replay(smoke_run, tmp_pat
 
 def test_packaging_a_kept_checkpoint_cuts_the_scalars_at_it(smoke_run_copy, tmp_path, monkeypatch):
     """--checkpoint samples_000000768.pt ships that checkpoint as last.pt, keeps only scalars logged at
-    steps <= 768 and records the choice in metrics.json."""
+    steps <= 768 and records the choice in metrics.json; the run's resumes.txt (override history) is kept."""
     import json
 
     from charctl.commands.train import train_command
@@ -64,6 +64,8 @@ def test_packaging_a_kept_checkpoint_cuts_the_scalars_at_it(smoke_run_copy, tmp_
     steps, _ = read_scalars(dest / "tb")["train/episode_length"]
     assert max(steps) == 768 and max(read_scalars(src / "tb")["train/episode_length"][0]) == 1024
     assert json.loads((dest / "metrics.json").read_text())["packaged_checkpoint"]["samples"] == 768
+    resumes = (src / "resumes.txt").read_text()  # the resume above wrote its overrides; the package keeps them
+    assert "train.keep_checkpoint_every=256" in resumes and (dest / "resumes.txt").read_text() == resumes
 
 
 def test_an_inference_only_package_evaluates_and_fine_tunes_with_fresh_optimisers(
