@@ -6,6 +6,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from charctl.eval.report import markdown_grid
+from charctl.experiments.cgail.signatures import SIGNATURE_WITHIN
 
 
 def skills_performed(row: dict, min_coverage: float) -> int:
@@ -68,8 +69,9 @@ def _report_head(run_dir: Path, skills: list[str], a, fid: bool) -> list[str]:
 def _most(a) -> str:
     """The fidelity rule's first keys, in words."""
     return (
-        f"number of skills performed (coverage >= {a.min_coverage:g} and the named signature within 30 % of the "
-        "clip's: kick and spinkick foot peak, jump airborne share, spins' yaw rate), then min coverage"
+        f"number of skills performed (coverage >= {a.min_coverage:g} and the named signature within "
+        f"{SIGNATURE_WITHIN:.0%} of the clip's: kick and spinkick foot peak, jump airborne share, spins' yaw rate), "
+        "then min coverage"
     )
 
 
