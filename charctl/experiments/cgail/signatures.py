@@ -41,11 +41,19 @@ def signature_value(sig: dict, name: str, foot: str) -> float:
     return sig[f"{foot}_foot_peak"] if name == "foot" else sig[name]
 
 
+def signature_checks(entry: dict, share: float = SIGNATURE_WITHIN) -> list[tuple[str, float, float, bool]]:
+    """One (label, policy value, clip value, within `share`) per named signature of one skill's fidelity entry
+    (label: 'right foot peak' / 'left foot peak' for the kicking foot, else the entry's name in words)."""
+    foot = kicking_foot(entry["reference"])
+    checks = []
+    for name in named_signatures(entry["clip"]):
+        p, r = (signature_value(entry[side], name, foot) for side in ("policy", "reference"))
+        label = f"{foot} foot peak" if name == "foot" else name.replace("_", " ")
+        checks.append((label, p, r, within(p, r, share)))
+    return checks
+
+
 def signatures_met(entry: dict, share: float = SIGNATURE_WITHIN) -> bool:
     """Whether every named signature of one skill's fidelity entry is within `share` of its clip's (True for a
     skill with none)."""
-    foot = kicking_foot(entry["reference"])
-    return all(
-        within(signature_value(entry["policy"], n, foot), signature_value(entry["reference"], n, foot), share)
-        for n in named_signatures(entry["clip"])
-    )
+    return all(ok for *_, ok in signature_checks(entry, share))
